@@ -1,0 +1,23 @@
+//! The motion model every other crate builds on.
+//!
+//! * [`Skeleton`]: joints in topological order (a parent always comes before its
+//!   children), rest offsets in metres, y up, the source file's channel layout and
+//!   joint limits where the file has them.
+//! * [`Motion`]: a skeleton, a frame rate, the world position of the root per
+//!   frame and one local rotation per joint per frame, plus forward kinematics.
+//!
+//! All lengths are metres, all angles radians, all rotations unit quaternions
+//! (`glam::DQuat`, f64: the motion model is the reference copy of a clip, physics
+//! converts to f32 where speed matters).
+
+pub mod error;
+pub mod motion;
+pub mod rotation;
+pub mod skeleton;
+
+pub use error::{MotionError, ParseError};
+pub use motion::Motion;
+pub use skeleton::{Axis, Channel, Joint, JointLimits, Skeleton};
+
+/// Re-exported so downstream crates use the same maths types.
+pub use glam;
