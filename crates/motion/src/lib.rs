@@ -10,14 +10,18 @@
 //! (`glam::DQuat`, f64: the motion model is the reference copy of a clip, physics
 //! converts to f32 where speed matters).
 
+pub mod bvh;
 pub mod error;
 pub mod motion;
 pub mod rotation;
 pub mod skeleton;
+mod text;
+pub mod units;
 
 pub use error::{MotionError, ParseError};
 pub use motion::Motion;
-pub use skeleton::{Axis, Channel, Joint, JointLimits, Skeleton};
+pub use skeleton::{Axis, Channel, Joint, JointLimits, Skeleton, Transform};
+pub use units::Unit;
 
 /// Re-exported so downstream crates use the same maths types.
 pub use glam;

@@ -56,7 +56,7 @@ impl Motion {
                     skeleton.joint(i % skeleton.len()).name
                 ));
             }
-            *q = *q / n;
+            *q /= n;
         }
         Ok(Motion {
             skeleton,

@@ -1,0 +1,268 @@
+//! Property tests of the file formats: random skeletons and motions survive a
+//! BVH round trip, and no input bytes make a parser panic.
+
+use std::sync::Arc;
+
+use motion::glam::{DQuat, DVec3};
+use motion::{Axis, Channel, Joint, Motion, Skeleton, Unit, bvh, rotation};
+use proptest::prelude::*;
+
+const AXES: [Axis; 3] = [Axis::X, Axis::Y, Axis::Z];
+
+/// A random joint layout: parent index, offset, channels.
+#[derive(Debug, Clone)]
+struct JointSpec {
+    parent_pick: usize,
+    offset: [f64; 3],
+    rot_axes: Vec<usize>,
+    root_pos_axes: Vec<usize>,
+    end_site: Option<[f64; 3]>,
+}
+
+fn joint_spec() -> impl Strategy<Value = JointSpec> {
+    (
+        any::<usize>(),
+        prop::array::uniform3(-50.0f64..50.0),
+        prop::sample::subsequence(vec![0usize, 1, 2], 0..=3).prop_shuffle(),
+        prop::sample::subsequence(vec![0usize, 1, 2], 0..=3).prop_shuffle(),
+        prop::option::of(prop::array::uniform3(-20.0f64..20.0)),
+    )
+        .prop_map(
+            |(parent_pick, offset, rot_axes, root_pos_axes, end_site)| JointSpec {
+                parent_pick,
+                offset,
+                rot_axes,
+                root_pos_axes,
+                end_site,
+            },
+        )
+}
+
+#[derive(Debug, Clone)]
+struct Case {
+    joints: Vec<JointSpec>,
+    unit: Unit,
+    frames: usize,
+    /// Angles in radians per frame per joint per channel (enough of them).
+    angles: Vec<f64>,
+    root: Vec<[f64; 3]>,
+    /// Free rotations for the "not representable" variant.
+    free: Vec<[f64; 4]>,
+    fps: f64,
+}
+
+fn case() -> impl Strategy<Value = Case> {
+    (
+        prop::collection::vec(joint_spec(), 1..10),
+        prop::sample::select(vec![
+            Unit::Metres,
+            Unit::Centimetres,
+            Unit::Inches,
+            Unit::CmuAsf,
+            Unit::Millimetres,
+        ]),
+        1usize..5,
+        prop::sample::select(vec![24.0, 30.0, 60.0, 120.0, 29.97]),
+    )
+        .prop_flat_map(|(joints, unit, frames, fps)| {
+            let n = joints.len();
+            (
+                Just(joints),
+                Just(unit),
+                Just(frames),
+                prop::collection::vec(-4.0f64..4.0, frames * n * 3),
+                prop::collection::vec(prop::array::uniform3(-300.0f64..300.0), frames),
+                prop::collection::vec(prop::array::uniform4(-1.0f64..1.0), frames * n),
+                Just(fps),
+            )
+        })
+        .prop_map(|(joints, unit, frames, angles, root, free, fps)| Case {
+            joints,
+            unit,
+            frames,
+            angles,
+            root,
+            free,
+            fps,
+        })
+}
+
+fn build(case: &Case, free_rotations: bool) -> Motion {
+    let scale = case.unit.metres().unwrap();
+    let joints: Vec<Joint> = case
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, spec)| {
+            let mut channels = Vec::new();
+            if i == 0 {
+                channels.extend(
+                    spec.root_pos_axes
+                        .iter()
+                        .map(|&a| Channel::Position(AXES[a])),
+                );
+            }
+            channels.extend(spec.rot_axes.iter().map(|&a| Channel::Rotation(AXES[a])));
+            Joint {
+                name: format!("joint {i}"),
+                parent: if i == 0 {
+                    None
+                } else {
+                    Some(spec.parent_pick % i)
+                },
+                offset: DVec3::from_array(spec.offset) * scale,
+                channels,
+                end_site: spec.end_site.map(|e| DVec3::from_array(e) * scale),
+                limits: None,
+            }
+        })
+        .collect();
+    let n = joints.len();
+    let skeleton = Arc::new(Skeleton::new(joints, scale).unwrap());
+    let mut rotations = Vec::with_capacity(case.frames * n);
+    for f in 0..case.frames {
+        for (j, spec) in case.joints.iter().enumerate() {
+            let q = if free_rotations {
+                let [x, y, z, w] = case.free[f * n + j];
+                let q = DQuat::from_xyzw(x, y, z, w);
+                if q.length() < 1e-3 {
+                    DQuat::IDENTITY
+                } else {
+                    q.normalize()
+                }
+            } else {
+                let axes: Vec<Axis> = spec.rot_axes.iter().map(|&a| AXES[a]).collect();
+                let base = (f * n + j) * 3;
+                rotation::from_channels(&axes, &case.angles[base..base + axes.len()])
+            };
+            rotations.push(q);
+        }
+    }
+    // The root may only move along axes it has position channels for (else it
+    // stays at its offset), unless the rotations are free anyway.
+    let root_spec = &case.joints[0];
+    let root = (0..case.frames)
+        .map(|f| {
+            let mut p = DVec3::from_array(root_spec.offset);
+            for &a in &root_spec.root_pos_axes {
+                p[a] = case.root[f][a];
+            }
+            if free_rotations {
+                p = DVec3::from_array(case.root[f]);
+            }
+            p * scale
+        })
+        .collect();
+    Motion::new(skeleton, case.fps, root, rotations).unwrap()
+}
+
+fn max_position_error(a: &Motion, b: &Motion) -> f64 {
+    assert_eq!(a.frames(), b.frames());
+    assert_eq!(a.joints(), b.joints());
+    let mut worst: f64 = 0.0;
+    for f in 0..a.frames() {
+        let pa = a.world_positions(f);
+        let pb = b.world_positions(f);
+        for (j, p) in pa.iter().enumerate() {
+            let k = b.skeleton().find(&a.skeleton().joint(j).name).unwrap();
+            worst = worst.max((*p - pb[k]).length());
+        }
+    }
+    worst
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn bvh_round_trip_keeps_world_positions(case in case()) {
+        for free in [false, true] {
+            let m = build(&case, free);
+            let text = bvh::to_bytes(&m);
+            let back = bvh::parse(&text, "rt.bvh", case.unit).unwrap();
+            prop_assert!((back.fps() - m.fps()).abs() < 1e-9 * m.fps());
+            let err = max_position_error(&m, &back);
+            prop_assert!(err < 1e-5, "free={free}: error {err} m\n{}", String::from_utf8_lossy(&text));
+            if !free {
+                // Representable motions keep every joint's channel layout.
+                for (j, joint) in m.skeleton().joints().iter().enumerate().skip(1) {
+                    let k = back.skeleton().find(&joint.name).unwrap();
+                    if !joint.channels.is_empty() {
+                        prop_assert_eq!(&back.skeleton().joint(k).channels, &joint.channels, "joint {}", j);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bvh_never_panics_on_bytes(bytes in prop::collection::vec(any::<u8>(), 0..600)) {
+        let _ = bvh::parse(&bytes, "fuzz.bvh", Unit::Auto);
+    }
+
+    #[test]
+    fn bvh_never_panics_on_mutations(
+        case in case(),
+        edits in prop::collection::vec((any::<usize>(), any::<u8>(), 0u8..4), 1..6),
+    ) {
+        let mut text = bvh::to_bytes(&build(&case, false));
+        mutate(&mut text, &edits);
+        let _ = bvh::parse(&text, "fuzz.bvh", Unit::Auto);
+    }
+}
+
+/// Apply byte edits: replace, delete, insert or truncate at a position.
+fn mutate(text: &mut Vec<u8>, edits: &[(usize, u8, u8)]) {
+    for &(pos, byte, kind) in edits {
+        if text.is_empty() {
+            text.push(byte);
+            continue;
+        }
+        let at = pos % text.len();
+        match kind {
+            0 => text[at] = byte,
+            1 => {
+                text.remove(at);
+            }
+            2 => text.insert(at, byte),
+            _ => text.truncate(at),
+        }
+    }
+}
+
+#[test]
+fn bvh_guesses_units_from_body_size() {
+    // A 1.8 m tall two-bone body written in mm, cm, in and m reads back the same.
+    let joint = |name: &str, parent, y: f64| Joint {
+        name: name.into(),
+        parent,
+        offset: DVec3::new(0.0, y, 0.0),
+        channels: vec![],
+        end_site: None,
+        limits: None,
+    };
+    let mut top = joint("head", Some(1), 0.8);
+    top.end_site = Some(DVec3::new(0.0, 0.1, 0.0));
+    let joints = vec![joint("hips", None, 0.0), joint("spine", Some(0), 0.0), top];
+    for unit in [
+        Unit::Millimetres,
+        Unit::Centimetres,
+        Unit::Inches,
+        Unit::Metres,
+    ] {
+        let mut js = joints.clone();
+        js[0].end_site = None;
+        js[1].end_site = Some(DVec3::new(0.0, -0.9, 0.0));
+        let s = Arc::new(Skeleton::new(js, unit.metres().unwrap()).unwrap());
+        let m = Motion::new(
+            s,
+            30.0,
+            vec![DVec3::new(0.0, 0.9, 0.0)],
+            vec![DQuat::IDENTITY; 3],
+        )
+        .unwrap();
+        let back = bvh::parse(&bvh::to_bytes(&m), "u.bvh", Unit::Auto).unwrap();
+        assert_eq!(back.skeleton().source_unit_m(), unit.metres().unwrap());
+        assert!(max_position_error(&m, &back) < 1e-6);
+    }
+}
