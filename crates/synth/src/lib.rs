@@ -20,6 +20,7 @@
 
 pub mod error;
 pub mod fixtures;
+pub mod ik;
 pub mod mask;
 pub mod mirror;
 pub mod names;
@@ -31,6 +32,7 @@ pub mod time_warp;
 use serde::{Deserialize, Serialize};
 
 pub use error::SynthError;
+pub use ik::{IkParams, IkReport, Preset, ik};
 pub use mask::{Mask, MaskFill, MaskMode, MaskParams, mask};
 pub use mirror::{MirrorAxis, MirrorParams, mirror};
 pub use noise::{NoiseParams, noise};

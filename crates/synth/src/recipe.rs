@@ -23,8 +23,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use crate::{
-    Augmented, MaskParams, MirrorParams, NoiseParams, SynthError, TimeWarpParams, mask, mirror,
-    noise, output_seed, rng_from_seed, time_warp,
+    Augmented, IkParams, MaskParams, MirrorParams, NoiseParams, SynthError, TimeWarpParams, ik,
+    mask, mirror, noise, output_seed, rng_from_seed, time_warp,
 };
 
 /// Largest `copies` of one op (a guard against typos like `copies = 100000`).
@@ -40,10 +40,11 @@ pub enum Op {
     TimeWarp(TimeWarpParams),
     Mirror(MirrorParams),
     Mask(MaskParams),
+    Ik(IkParams),
 }
 
 impl Op {
-    pub const KINDS: &[&str] = &["noise", "time_warp", "mirror", "mask"];
+    pub const KINDS: &[&str] = &["noise", "time_warp", "mirror", "mask", "ik"];
 
     /// The op's name as written in recipes.
     pub fn kind(&self) -> &'static str {
@@ -52,6 +53,7 @@ impl Op {
             Op::TimeWarp(_) => "time_warp",
             Op::Mirror(_) => "mirror",
             Op::Mask(_) => "mask",
+            Op::Ik(_) => "ik",
         }
     }
 
@@ -62,6 +64,7 @@ impl Op {
             Op::TimeWarp(p) => p.validate(),
             Op::Mirror(p) => p.validate(),
             Op::Mask(p) => p.validate(),
+            Op::Ik(p) => p.validate(),
         }
     }
 
@@ -76,6 +79,7 @@ impl Op {
             Op::TimeWarp(p) => time_warp(motion, p, rng),
             Op::Mirror(p) => mirror(motion, p, rng),
             Op::Mask(p) => mask(motion, p, rng),
+            Op::Ik(p) => ik(motion, p, rng),
         }
     }
 
@@ -95,6 +99,7 @@ impl Op {
             "time_warp" => Op::TimeWarp(serde_json::from_value(params).map_err(e)?),
             "mirror" => Op::Mirror(serde_json::from_value(params).map_err(e)?),
             "mask" => Op::Mask(serde_json::from_value(params).map_err(e)?),
+            "ik" => Op::Ik(serde_json::from_value(params).map_err(e)?),
             other => {
                 return Err(format!(
                     "unknown op `{other}` (known: {})",
