@@ -10,6 +10,8 @@
 //! (`glam::DQuat`, f64: the motion model is the reference copy of a clip, physics
 //! converts to f32 where speed matters).
 
+pub mod amc;
+pub mod asf;
 pub mod bvh;
 pub mod error;
 pub mod motion;

@@ -266,3 +266,62 @@ fn bvh_guesses_units_from_body_size() {
         assert!(max_position_error(&m, &back) < 1e-6);
     }
 }
+
+const ASF: &str = ":version 1.10\n:name t\n:units\n  mass 1.0\n  length 0.45\n  angle deg\n:documentation\n  x\n\
+:root\n   order TX TY TZ RX RY RZ\n   axis XYZ\n   position 0 0 0\n   orientation 0 0 0\n\
+:bonedata\n  begin\n     id 1\n     name lfemur\n     direction 0.34 -0.94 0\n     length 7.3\n     axis 0 0 20 XYZ\n     dof rx ry rz\n\
+     limits (-160.0 20.0)\n            (-70.0 70.0)\n            (-inf inf)\n  end\n\
+  begin\n     id 2\n     name ltibia\n     direction 0.34 -0.94 0\n     length 6.9\n     axis 0 0 20 XYZ\n     dof rx\n     limits (-10 170)\n  end\n\
+  begin\n     id 3\n     name lowerback\n     direction 0 1 0\n     length 2\n     axis 0 0 0 XYZ\n     dof rx ry rz\n  end\n\
+:hierarchy\n  begin\n    root lfemur lowerback\n    lfemur ltibia\n  end\n";
+
+const AMC: &str = "# c\n:FULLY-SPECIFIED\n:DEGREES\n1\nroot 1 16 3 10 -20 170\nlfemur 1 2 3\nltibia 40\nlowerback 1 2 3\n\
+2\nroot 1 16 3.5 10 -20 171\nlfemur 1 2 4\nltibia 41\n";
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn asf_amc_never_panic_on_mutations(
+        edits in prop::collection::vec((any::<usize>(), any::<u8>(), 0u8..4), 1..6),
+        which in 0u8..2,
+    ) {
+        let mut asf_text = ASF.as_bytes().to_vec();
+        let mut amc_text = AMC.as_bytes().to_vec();
+        if which == 0 {
+            mutate(&mut asf_text, &edits);
+        } else {
+            mutate(&mut amc_text, &edits);
+        }
+        if let Ok(asf) = motion::asf::parse(&asf_text, "fuzz.asf") {
+            let _ = motion::amc::parse(&amc_text, "fuzz.amc", &asf, 120.0);
+        }
+    }
+
+    #[test]
+    fn asf_amc_never_panic_on_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        let _ = motion::asf::parse(&bytes, "fuzz.asf");
+        let asf = motion::asf::parse(ASF.as_bytes(), "t.asf").unwrap();
+        let _ = motion::amc::parse(&bytes, "fuzz.amc", &asf, 120.0);
+    }
+}
+
+#[test]
+fn amc_to_bvh_round_trip_and_limits() {
+    let asf = motion::asf::parse(ASF.as_bytes(), "t.asf").unwrap();
+    let m = motion::amc::parse(AMC.as_bytes(), "t.amc", &asf, 120.0).unwrap();
+    let back = bvh::parse(&bvh::to_bytes(&m), "t.bvh", Unit::Auto).unwrap();
+    assert!(max_position_error(&m, &back) < 1e-6);
+    // The knee's limits in radians with frame C = Rz(20 deg).
+    let knee = asf.skeleton().find("ltibia").unwrap();
+    let lim = asf.skeleton().joint(knee).limits.clone().unwrap();
+    assert_eq!(
+        lim.dofs,
+        vec![(Axis::X, -10f64.to_radians(), 170f64.to_radians())]
+    );
+    // The knee value 40 degrees sits inside the limits once expressed in C.
+    let local = m.rotation(0, knee);
+    let in_frame = lim.frame.inverse() * local * lim.frame;
+    let angle = rotation::to_channels(in_frame, &[Axis::X])[0];
+    assert!((angle - 40f64.to_radians()).abs() < 1e-9);
+}

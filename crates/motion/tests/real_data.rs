@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use motion::glam::DVec3;
-use motion::{Motion, Unit, bvh, units};
+use motion::{Motion, Unit, amc, asf, bvh, units};
 
 fn data_dir() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
@@ -123,4 +123,133 @@ fn cmu_pairs_share_one_world_frame() {
             "frame {f}: hips {horizontal} m apart"
         );
     }
+}
+
+/// The HDM05 physical facts a wrong ASF/AMC convention breaks (checked: the
+/// other composition orders of `dof` or `axis` rotations fail them).
+struct Facts {
+    lowest: f64,
+    left_toe_min: f64,
+    right_toe_min: f64,
+    head_below_root_frames: usize,
+    right_hand_min: f64,
+    right_hand_over_head: f64,
+}
+
+fn facts(m: &Motion) -> Facts {
+    let s = m.skeleton();
+    let id = |n: &str| s.find(n).unwrap_or_else(|| panic!("no joint {n}"));
+    let (lt, rt, head, rh) = (id("ltoes"), id("rtoes"), id("head"), id("rhand"));
+    let mut f = Facts {
+        lowest: f64::INFINITY,
+        left_toe_min: f64::INFINITY,
+        right_toe_min: f64::INFINITY,
+        head_below_root_frames: 0,
+        right_hand_min: f64::INFINITY,
+        right_hand_over_head: f64::NEG_INFINITY,
+    };
+    for t in 0..m.frames() {
+        let p = m.world_positions(t);
+        f.lowest = p.iter().fold(f.lowest, |lo, q| lo.min(q.y));
+        f.left_toe_min = f.left_toe_min.min(p[lt].y);
+        f.right_toe_min = f.right_toe_min.min(p[rt].y);
+        if p[head].y < p[0].y {
+            f.head_below_root_frames += 1;
+        }
+        f.right_hand_min = f.right_hand_min.min(p[rh].y);
+        f.right_hand_over_head = f.right_hand_over_head.max(p[rh].y - p[head].y);
+    }
+    f
+}
+
+#[test]
+fn hdm05_clips_parse_convert_and_round_trip() {
+    let Some(dir) = data_dir() else { return };
+    let dir = dir.join("hdm05");
+    let started = std::time::Instant::now();
+    let mut skeletons = std::collections::HashMap::new();
+    for asf_path in files(&dir, "asf") {
+        let asf = asf::read(&asf_path).unwrap_or_else(|e| panic!("{e}"));
+        // Upright rest pose, arms out: height (toe to head tip) and arm span.
+        let height = asf.skeleton().rest_height();
+        let size = units::rest_size(asf.skeleton());
+        assert!(
+            (1.5..1.95).contains(&height),
+            "{}: rest height {height} m",
+            asf_path.display()
+        );
+        assert!(
+            (1.5..2.2).contains(&size),
+            "{}: rest size {size} m",
+            asf_path.display()
+        );
+        let actor = asf_path
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .replace("HDM_", "");
+        skeletons.insert(actor, asf);
+    }
+    assert_eq!(skeletons.len(), 5);
+    let clips = files(&dir, "amc");
+    // 210 clips + 5 skeletons = the 215 files of the folder (7 classes, see its README).
+    assert_eq!(clips.len(), 210, "expected the 210 HDM05 clips");
+    let mut worst: f64 = 0.0;
+    for path in &clips {
+        let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+        let name = path.display();
+        let actor = stem.split('_').nth(1).unwrap();
+        let asf = &skeletons[actor];
+        let m = amc::read(path, asf, 120.0).unwrap_or_else(|e| panic!("{e}"));
+        assert!(m.frames() > 10, "{name}");
+
+        let f = facts(&m);
+        assert!(
+            (-0.05..0.12).contains(&f.lowest),
+            "{name}: lowest joint at {} m",
+            f.lowest
+        );
+        let deposit = stem.contains("depositFloorR");
+        if !deposit {
+            // Upright (depositing on the floor, some takes stoop lower than the hips).
+            assert_eq!(f.head_below_root_frames, 0, "{name}: head below the hips");
+        }
+        if !stem.contains("kick") && !deposit {
+            // Both feet touch the floor at some point, equally (left/right symmetry).
+            let d = (f.left_toe_min - f.right_toe_min).abs();
+            assert!(
+                d < 0.06,
+                "{name}: toes reach {} / {} m",
+                f.left_toe_min,
+                f.right_toe_min
+            );
+        }
+        if deposit {
+            assert!(
+                f.right_hand_min < 0.35,
+                "{name}: right hand lowest {} m",
+                f.right_hand_min
+            );
+        }
+        if stem.contains("grabHighR") {
+            assert!(
+                f.right_hand_over_head > -0.05,
+                "{name}: right hand {} m over head",
+                f.right_hand_over_head
+            );
+        }
+
+        // AMC -> BVH -> read: same world positions.
+        let text = bvh::to_bytes(&m);
+        let back = bvh::parse(&text, format!("{name} (as BVH)"), Unit::Auto)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let err = max_position_error(&m, &back);
+        worst = worst.max(err);
+        assert!(err < 1e-5, "{name}: AMC -> BVH error {err} m");
+    }
+    eprintln!(
+        "hdm05: {} clips parsed, checked and round-tripped in {:.2?} (worst error {worst:.2e} m)",
+        clips.len(),
+        started.elapsed()
+    );
 }
