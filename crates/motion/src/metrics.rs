@@ -1,0 +1,332 @@
+//! Physical plausibility metrics on any motion: the yardsticks for synthesis and
+//! for the physical correction that follows it.
+//!
+//! All lengths are metres, times seconds, the ground is the plane y = 0 (y up).
+//! "Body points" are all joints plus end sites. "Foot points" are the joints
+//! whose names contain `foot`, `ankle`, `toe` or `heel` (with their end sites);
+//! without such names, the leaf joints whose rest position lies in the lowest
+//! 10 % of the body, with their end sites.
+//!
+//! * Foot skating: mean horizontal speed (m/s) of foot points while in ground
+//!   contact. A foot point is in contact at frames `t` and `t+1` when at both its
+//!   height is below `contact_height_m` plus its rest height above the lowest
+//!   foot point (so an ankle, which stands ~8 cm above the sole, gets a
+//!   correspondingly higher threshold) and its vertical speed is below
+//!   `contact_vertical_speed_m_s`. Speeds are forward differences.
+//! * Ground penetration: per frame the depth of the lowest body point below
+//!   y = 0 (0 when above); mean and max over frames.
+//! * Floating: fraction of frames whose lowest body point is higher than
+//!   `floating_height_m` (jumps count), and the mean height of the lowest point.
+//! * Bone-length drift: largest relative difference between the FK distance of
+//!   a joint to its parent and the skeleton's bone length, over frames (0 up to
+//!   rounding for rotation-based motion; matters for position-derived outputs).
+//! * Jerk: mean magnitude of the third time derivative of joint positions
+//!   (m/s^3), third-order finite differences; 0 for clips under 4 frames.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::Motion;
+use crate::skeleton::Transform;
+
+/// Thresholds of the contact and floating tests.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Thresholds {
+    /// Height (above the point's standing height) under which a foot point may be in contact.
+    pub contact_height_m: f64,
+    /// Vertical speed under which a low foot point is in contact.
+    pub contact_vertical_speed_m_s: f64,
+    /// Height of the lowest body point above which a frame counts as floating.
+    pub floating_height_m: f64,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Thresholds {
+            contact_height_m: 0.05,
+            contact_vertical_speed_m_s: 0.25,
+            floating_height_m: 0.05,
+        }
+    }
+}
+
+/// The plausibility metrics of one motion (units in the field names).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plausibility {
+    pub frames: usize,
+    pub fps: f64,
+    /// Joints used as foot points.
+    pub foot_joints: Vec<String>,
+    /// Mean horizontal speed of foot points in contact, m/s (0 without contact).
+    pub foot_skating_m_s: f64,
+    /// Fraction of (foot point, frame step) pairs in contact.
+    pub contact_fraction: f64,
+    /// Mean over frames of the lowest point's depth below y = 0, m.
+    pub penetration_mean_m: f64,
+    /// Largest depth below y = 0, m.
+    pub penetration_max_m: f64,
+    /// Fraction of frames with the lowest point above `floating_height_m`.
+    pub floating_fraction: f64,
+    /// Mean height of the lowest body point, m (negative = below ground).
+    pub lowest_point_mean_m: f64,
+    /// Largest relative bone-length error (dimensionless).
+    pub bone_length_drift: f64,
+    /// Mean magnitude of the third derivative of joint positions, m/s^3.
+    pub jerk_m_s3: f64,
+    pub thresholds: Thresholds,
+}
+
+/// The foot points: (joint, Some(end site offset) or None for the joint itself).
+fn foot_points(motion: &Motion) -> Vec<(usize, Option<DVec3>)> {
+    let s = motion.skeleton();
+    let words = ["foot", "ankle", "toe", "heel"];
+    let mut joints: Vec<usize> = (0..s.len())
+        .filter(|&j| {
+            let n = s.joint(j).name.to_ascii_lowercase();
+            words.iter().any(|w| n.contains(w))
+        })
+        .collect();
+    if joints.is_empty() {
+        let rest = s.rest_positions();
+        let lo = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+        let cut = lo + 0.1 * s.rest_height();
+        joints = (1..s.len())
+            .filter(|&j| s.children(j).next().is_none() && rest[j].y <= cut)
+            .collect();
+    }
+    let mut points = Vec::new();
+    for j in joints {
+        points.push((j, None));
+        if let Some(e) = s.joint(j).end_site {
+            points.push((j, Some(e)));
+        }
+    }
+    points
+}
+
+fn point(x: &[Transform], p: (usize, Option<DVec3>)) -> DVec3 {
+    match p.1 {
+        None => x[p.0].translation,
+        Some(e) => x[p.0].translation + x[p.0].rotation * e,
+    }
+}
+
+/// Metrics with the default thresholds.
+pub fn plausibility(motion: &Motion) -> Plausibility {
+    plausibility_with(motion, &Thresholds::default())
+}
+
+pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
+    let s = motion.skeleton();
+    let (n_t, n_j) = (motion.frames(), motion.joints());
+    let dt = 1.0 / motion.fps();
+    let feet = foot_points(motion);
+    let mut x = vec![Transform::IDENTITY; n_j];
+
+    // Rest heights of foot points above the lowest one.
+    let mut rest_x = vec![Transform::IDENTITY; n_j];
+    s.forward(DVec3::ZERO, &vec![glam::DQuat::IDENTITY; n_j], &mut rest_x);
+    let rest_y: Vec<f64> = feet.iter().map(|p| point(&rest_x, *p).y).collect();
+    let rest_lo = rest_y.iter().copied().fold(f64::INFINITY, f64::min);
+
+    let lengths = s.bone_lengths();
+    let mut positions = Vec::with_capacity(n_t * n_j);
+    let mut foot_pos = Vec::with_capacity(n_t * feet.len());
+    let mut lowest = Vec::with_capacity(n_t);
+    let mut drift = 0.0f64;
+    for t in 0..n_t {
+        motion.world_transforms_into(t, &mut x);
+        let mut lo = f64::INFINITY;
+        for j in 0..n_j {
+            let p = x[j].translation;
+            lo = lo.min(p.y);
+            if let Some(e) = s.joint(j).end_site {
+                lo = lo.min((p + x[j].rotation * e).y);
+            }
+            if let Some(parent) = s.parent(j)
+                && lengths[j] > 1e-9
+            {
+                let d = (p - x[parent].translation).length();
+                drift = drift.max((d - lengths[j]).abs() / lengths[j]);
+            }
+            positions.push(p);
+        }
+        lowest.push(lo);
+        foot_pos.extend(feet.iter().map(|p| point(&x, *p)));
+    }
+
+    // Foot skating.
+    let nf = feet.len();
+    let in_contact = |t: usize, i: usize| {
+        let p = foot_pos[t * nf + i];
+        p.y < th.contact_height_m + (rest_y[i] - rest_lo)
+    };
+    let (mut speed_sum, mut contacts, mut steps) = (0.0, 0usize, 0usize);
+    for t in 0..n_t.saturating_sub(1) {
+        for i in 0..nf {
+            steps += 1;
+            let (a, b) = (foot_pos[t * nf + i], foot_pos[(t + 1) * nf + i]);
+            let v = (b - a) / dt;
+            if in_contact(t, i) && in_contact(t + 1, i) && v.y.abs() < th.contact_vertical_speed_m_s
+            {
+                contacts += 1;
+                speed_sum += DVec3::new(v.x, 0.0, v.z).length();
+            }
+        }
+    }
+
+    // Jerk.
+    let mut jerk_sum = 0.0;
+    let mut jerk_n = 0usize;
+    for t in 0..n_t.saturating_sub(3) {
+        for j in 0..n_j {
+            let p = |k: usize| positions[(t + k) * n_j + j];
+            let d3 = p(3) - 3.0 * p(2) + 3.0 * p(1) - p(0);
+            jerk_sum += d3.length() / (dt * dt * dt);
+            jerk_n += 1;
+        }
+    }
+
+    let depth: Vec<f64> = lowest.iter().map(|y| (-y).max(0.0)).collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    Plausibility {
+        frames: n_t,
+        fps: motion.fps(),
+        foot_joints: {
+            let mut names: Vec<String> = feet.iter().map(|p| s.joint(p.0).name.clone()).collect();
+            names.dedup();
+            names
+        },
+        foot_skating_m_s: if contacts > 0 {
+            speed_sum / contacts as f64
+        } else {
+            0.0
+        },
+        contact_fraction: contacts as f64 / steps.max(1) as f64,
+        penetration_mean_m: mean(&depth),
+        penetration_max_m: depth.iter().copied().fold(0.0, f64::max),
+        floating_fraction: lowest.iter().filter(|y| **y > th.floating_height_m).count() as f64
+            / n_t as f64,
+        lowest_point_mean_m: mean(&lowest),
+        bone_length_drift: drift,
+        jerk_m_s3: if jerk_n > 0 {
+            jerk_sum / jerk_n as f64
+        } else {
+            0.0
+        },
+        thresholds: *th,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Joint, Skeleton};
+    use glam::DQuat;
+    use std::sync::Arc;
+
+    fn legs() -> Arc<Skeleton> {
+        let j = |name: &str, parent: Option<usize>, o: [f64; 3], end: Option<[f64; 3]>| Joint {
+            name: name.into(),
+            parent,
+            offset: DVec3::from_array(o),
+            channels: vec![],
+            end_site: end.map(DVec3::from_array),
+            limits: None,
+        };
+        Arc::new(
+            Skeleton::new(
+                vec![
+                    j("Hips", None, [0.0; 3], None),
+                    j("LeftUpLeg", Some(0), [0.1, 0.0, 0.0], None),
+                    j("LeftLeg", Some(1), [0.0, -0.45, 0.0], None),
+                    j("LeftFoot", Some(2), [0.0, -0.42, 0.0], None),
+                    j(
+                        "LeftToe",
+                        Some(3),
+                        [0.0, -0.08, 0.1],
+                        Some([0.0, 0.0, 0.05]),
+                    ),
+                    j("RightUpLeg", Some(0), [-0.1, 0.0, 0.0], None),
+                    j("RightLeg", Some(5), [0.0, -0.45, 0.0], None),
+                    j("RightFoot", Some(6), [0.0, -0.42, 0.0], None),
+                    j(
+                        "RightToe",
+                        Some(7),
+                        [0.0, -0.08, 0.1],
+                        Some([0.0, 0.0, 0.05]),
+                    ),
+                    j("Spine", Some(0), [0.0, 0.3, 0.0], Some([0.0, 0.4, 0.0])),
+                ],
+                1.0,
+            )
+            .unwrap(),
+        )
+    }
+
+    /// Standing (toes on y = 0 plus `lift`), the root sliding along z at `speed`.
+    fn standing(frames: usize, speed: f64, lift: f64) -> Motion {
+        let s = legs();
+        let n = s.len();
+        let root = (0..frames)
+            .map(|t| DVec3::new(0.0, 0.95 + lift, speed * t as f64 / 30.0))
+            .collect();
+        Motion::new(s, 30.0, root, vec![DQuat::IDENTITY; frames * n]).unwrap()
+    }
+
+    #[test]
+    fn sliding_feet_skate_at_the_sliding_speed() {
+        let m = plausibility(&standing(40, 0.5, 0.0));
+        assert!((m.foot_skating_m_s - 0.5).abs() < 1e-9, "{m:?}");
+        assert!((m.contact_fraction - 1.0).abs() < 1e-12);
+        assert_eq!(
+            m.foot_joints,
+            ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
+        );
+        let still = plausibility(&standing(40, 0.0, 0.0));
+        assert!(still.foot_skating_m_s.abs() < 1e-12);
+        assert!(still.penetration_max_m < 1e-12 && still.floating_fraction == 0.0);
+        assert!(still.jerk_m_s3 < 1e-9 && still.bone_length_drift < 1e-12);
+    }
+
+    #[test]
+    fn lowering_by_5_cm_penetrates_5_cm_and_lifting_floats() {
+        let m = plausibility(&standing(20, 0.0, -0.05));
+        assert!((m.penetration_mean_m - 0.05).abs() < 1e-9, "{m:?}");
+        assert!((m.penetration_max_m - 0.05).abs() < 1e-9);
+        assert!((m.lowest_point_mean_m + 0.05).abs() < 1e-9);
+        let up = plausibility(&standing(20, 0.3, 0.2));
+        assert_eq!(up.floating_fraction, 1.0);
+        assert!((up.lowest_point_mean_m - 0.2).abs() < 1e-9);
+        assert_eq!(up.contact_fraction, 0.0);
+        assert_eq!(up.foot_skating_m_s, 0.0, "no contact, no skating");
+    }
+
+    #[test]
+    fn jerk_of_a_cubic_trajectory_is_its_third_derivative() {
+        // Root y(t) = 0.95 + a t^3: every joint has jerk 6a.
+        let s = legs();
+        let n = s.len();
+        let a = 0.7;
+        let root = (0..30)
+            .map(|t| {
+                let time = t as f64 / 30.0;
+                DVec3::new(0.0, 0.95 + a * time.powi(3), 0.0)
+            })
+            .collect();
+        let m = Motion::new(s, 30.0, root, vec![DQuat::IDENTITY; 30 * n]).unwrap();
+        let p = plausibility(&m);
+        assert!((p.jerk_m_s3 - 6.0 * a).abs() < 1e-6, "{}", p.jerk_m_s3);
+    }
+
+    #[test]
+    fn bone_drift_is_zero_for_rotations() {
+        let s = legs();
+        let n = s.len();
+        let rot: Vec<DQuat> = (0..10 * n)
+            .map(|i| DQuat::from_rotation_x(0.1 * i as f64))
+            .collect();
+        let m = Motion::new(s, 30.0, vec![DVec3::Y; 10], rot).unwrap();
+        assert!(plausibility(&m).bone_length_drift < 1e-12);
+    }
+}
