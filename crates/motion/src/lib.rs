@@ -14,14 +14,18 @@ pub mod amc;
 pub mod asf;
 pub mod bvh;
 pub mod error;
+pub mod io;
 pub mod metrics;
 pub mod motion;
+pub mod npz;
+pub mod resample;
 pub mod rotation;
 pub mod skeleton;
 mod text;
 pub mod units;
 
 pub use error::{MotionError, ParseError};
+pub use io::{LoadOptions, load, save};
 pub use motion::Motion;
 pub use skeleton::{Axis, Channel, Joint, JointLimits, Skeleton, Transform};
 pub use units::Unit;

@@ -325,3 +325,99 @@ fn amc_to_bvh_round_trip_and_limits() {
     let angle = rotation::to_channels(in_frame, &[Axis::X])[0];
     assert!((angle - 40f64.to_radians()).abs() < 1e-9);
 }
+
+/// Arrays of an NPZ archive by name.
+fn npz_arrays(bytes: &[u8]) -> std::collections::HashMap<String, motion::npz::NpyArray> {
+    motion::npz::read(bytes)
+        .unwrap()
+        .into_iter()
+        .map(|a| (a.name.clone(), a))
+        .collect()
+}
+
+#[test]
+fn npz_holds_the_motion_and_extras() {
+    let asf = motion::asf::parse(ASF.as_bytes(), "t.asf").unwrap();
+    let m = motion::amc::parse(AMC.as_bytes(), "t.amc", &asf, 120.0).unwrap();
+    let (t, j) = (m.frames(), m.joints());
+    let mask: Vec<u8> = (0..t * j).map(|i| (i % 2) as u8).collect();
+    let extra = motion::npz::NpyArray::u8("mask", &[t, j], &mask).unwrap();
+    let bytes = motion::npz::motion_to_bytes(&m, &[extra]).unwrap();
+    let a = npz_arrays(&bytes);
+    assert_eq!(a["positions"].shape, vec![t, j, 3]);
+    assert_eq!(a["rotations"].shape, vec![t, j, 4]);
+    assert_eq!(a["root_translation"].shape, vec![t, 3]);
+    assert_eq!(a["parents"].to_i32().unwrap(), vec![-1, 0, 1, 0]);
+    assert_eq!(a["offsets"].shape, vec![j, 3]);
+    assert_eq!(
+        a["joint_names"].to_strings().unwrap(),
+        vec!["root", "lfemur", "ltibia", "lowerback"]
+    );
+    assert_eq!(a["fps"].to_f64().unwrap(), vec![120.0]);
+    assert_eq!(a["mask"].to_u8().unwrap(), mask);
+    let pos = a["positions"].to_f32().unwrap();
+    let world = m.all_world_positions();
+    for (k, p) in world.iter().enumerate() {
+        for c in 0..3 {
+            assert!((pos[k * 3 + c] as f64 - p[c]).abs() < 1e-6);
+        }
+    }
+    let rot = a["rotations"].to_f32().unwrap();
+    let q = m.rotation(1, 2);
+    assert!((rot[(j + 2) * 4] as f64 - q.w).abs() < 1e-6);
+    assert!((rot[(j + 2) * 4 + 1] as f64 - q.x).abs() < 1e-6);
+}
+
+/// `np.load` reads the archive (skipped with a note without python3 + numpy).
+#[test]
+fn numpy_reads_the_npz() {
+    let has_numpy = std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_numpy {
+        eprintln!("note: python3 with numpy not found, skipping the np.load check");
+        return;
+    }
+    let asf = motion::asf::parse(ASF.as_bytes(), "t.asf").unwrap();
+    let m = motion::amc::parse(AMC.as_bytes(), "t.amc", &asf, 120.0).unwrap();
+    let path = std::env::temp_dir().join(format!("motion-npz-{}.npz", std::process::id()));
+    let mask = vec![true; m.frames() * m.joints()];
+    let extra = motion::npz::NpyArray::bool("mask", &[m.frames(), m.joints()], &mask).unwrap();
+    motion::npz::write_motion(&m, &[extra], &path).unwrap();
+    let script = r#"
+import sys, numpy as np
+d = np.load(sys.argv[1])
+p, r = d["positions"], d["rotations"]
+assert p.dtype == np.float32 and p.shape == (2, 4, 3), (p.dtype, p.shape)
+assert r.dtype == np.float32 and r.shape == (2, 4, 4)
+assert np.allclose(np.linalg.norm(r, axis=-1), 1.0, atol=1e-6)
+assert d["root_translation"].shape == (2, 3)
+assert np.allclose(d["root_translation"], p[:, 0, :])
+assert d["parents"].dtype == np.int32 and list(d["parents"]) == [-1, 0, 1, 0]
+assert d["offsets"].shape == (4, 3)
+assert d["joint_names"].dtype.kind == "U" and list(d["joint_names"]) == ["root", "lfemur", "ltibia", "lowerback"]
+assert d["fps"].shape == () and float(d["fps"]) == 120.0
+assert d["mask"].dtype == np.bool_ and d["mask"].shape == (2, 4) and d["mask"].all()
+# Bone lengths from positions match the offsets.
+par = d["parents"]
+for j in range(1, 4):
+    L = np.linalg.norm(p[:, j] - p[:, par[j]], axis=-1)
+    assert np.allclose(L, np.linalg.norm(d["offsets"][j]), atol=1e-5), (j, L)
+print("ok")
+"#;
+    let out = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(&path)
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_file(&path);
+    assert!(
+        out.status.success(),
+        "np.load failed:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "ok");
+}

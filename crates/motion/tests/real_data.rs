@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use motion::glam::DVec3;
-use motion::{Motion, Unit, amc, asf, bvh, units};
+use motion::{Motion, Unit, amc, asf, bvh, npz, resample, units};
 
 fn data_dir() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
@@ -103,6 +103,8 @@ fn cmu_bvh_files_parse_and_round_trip() {
                 a.name
             );
         }
+        check_npz(&m, &format!("{name}"));
+        check_resample(&m, &format!("{name}"));
     }
 }
 
@@ -246,10 +248,75 @@ fn hdm05_clips_parse_convert_and_round_trip() {
         let err = max_position_error(&m, &back);
         worst = worst.max(err);
         assert!(err < 1e-5, "{name}: AMC -> BVH error {err} m");
+
+        check_npz(&m, &format!("{name}"));
+        check_resample(&m, &format!("{name}"));
     }
     eprintln!(
         "hdm05: {} clips parsed, checked and round-tripped in {:.2?} (worst error {worst:.2e} m)",
         clips.len(),
         started.elapsed()
     );
+}
+
+/// The NPZ of a clip reads back with the right shapes and positions (float32).
+fn check_npz(m: &Motion, name: &str) {
+    let bytes = npz::motion_to_bytes(m, &[]).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let arrays = npz::read(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let get = |n: &str| {
+        arrays
+            .iter()
+            .find(|a| a.name == n)
+            .unwrap_or_else(|| panic!("{name}: no `{n}` in the NPZ"))
+    };
+    let (t, j) = (m.frames(), m.joints());
+    assert_eq!(get("positions").shape, vec![t, j, 3], "{name}");
+    assert_eq!(get("rotations").shape, vec![t, j, 4], "{name}");
+    assert_eq!(get("root_translation").shape, vec![t, 3], "{name}");
+    assert_eq!(get("parents").shape, vec![j], "{name}");
+    assert_eq!(get("offsets").shape, vec![j, 3], "{name}");
+    assert_eq!(get("fps").to_f64(), Some(vec![m.fps()]), "{name}");
+    let names = get("joint_names").to_strings().unwrap();
+    assert!(
+        names
+            .iter()
+            .zip(m.skeleton().joints())
+            .all(|(a, b)| *a == b.name)
+    );
+    let pos = get("positions").to_f32().unwrap();
+    let world = m.all_world_positions();
+    let worst = world
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            (DVec3::new(
+                pos[3 * k] as f64,
+                pos[3 * k + 1] as f64,
+                pos[3 * k + 2] as f64,
+            ) - *p)
+                .length()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "{name}: NPZ positions off by {worst} m");
+}
+
+/// 120 Hz -> 30 Hz keeps the duration and samples the source frames exactly.
+fn check_resample(m: &Motion, name: &str) {
+    let r = resample::resample(m, 30.0).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(
+        (r.duration_s() - m.duration_s()).abs() <= 0.5 / 30.0 + 1e-9,
+        "{name}"
+    );
+    let k = r.frames() / 2;
+    let src = (k as f64 * m.fps() / 30.0).round() as usize;
+    if (k as f64 * m.fps() / 30.0 - src as f64).abs() < 1e-6 {
+        let a = r.world_positions(k);
+        let b = m.world_positions(src);
+        let err = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (*x - *y).length())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-6, "{name}: resampled frame {k} off by {err} m");
+    }
 }

@@ -1,0 +1,207 @@
+//! One entry point to load and save clips in any supported format, chosen by
+//! file extension (case-insensitive), so the CLI and the services do not each
+//! repeat the dispatch:
+//!
+//! * `.bvh`: a BVH clip ([`crate::bvh`]), in `unit` (or guessed);
+//! * `.amc`: an AMC clip, which needs its ASF skeleton ([`crate::amc`]);
+//! * `.asf`: a skeleton alone, loaded as one frame of its rest pose;
+//! * saving: `.bvh` ([`crate::bvh::write_file`]) or `.npz`
+//!   ([`crate::npz::write_motion`]).
+//!
+//! The byte-slice functions ([`parse_bvh`], [`parse_asf`], [`parse_amc`],
+//! [`parse_named`]) serve uploads held in memory.
+
+use std::path::{Path, PathBuf};
+
+use crate::amc;
+use crate::asf::{self, Asf};
+use crate::bvh;
+use crate::error::{MotionError, ParseError};
+use crate::motion::Motion;
+use crate::npz;
+use crate::units::Unit;
+
+/// How to load a clip.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LoadOptions {
+    /// The ASF skeleton of an AMC clip.
+    pub skeleton: Option<PathBuf>,
+    /// Length unit of BVH files ([`Unit::Auto`] guesses from the body size).
+    pub unit: Unit,
+    /// Frame rate: the rate of AMC clips, which carry none (default
+    /// [`amc::DEFAULT_FPS`], 120 Hz); for BVH, replaces the file's `Frame Time`;
+    /// for an ASF rest pose, its rate (default 120).
+    pub fps: Option<f64>,
+}
+
+/// File formats by extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Bvh,
+    Amc,
+    Asf,
+    Npz,
+}
+
+impl Format {
+    /// The format of `path` by its extension.
+    pub fn of(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        Some(match ext.as_str() {
+            "bvh" => Format::Bvh,
+            "amc" => Format::Amc,
+            "asf" => Format::Asf,
+            "npz" => Format::Npz,
+            _ => return None,
+        })
+    }
+}
+
+fn whole(path: &Path, message: String) -> MotionError {
+    ParseError {
+        file: path.to_path_buf(),
+        line: None,
+        message,
+    }
+    .into()
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, MotionError> {
+    std::fs::read(path).map_err(|source| MotionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn fps_or_default(fps: Option<f64>) -> f64 {
+    fps.unwrap_or(amc::DEFAULT_FPS)
+}
+
+/// Load a clip from disk, dispatching on the extension (see the module doc).
+pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Motion, MotionError> {
+    let path = path.as_ref();
+    let format = Format::of(path);
+    let skeleton = match (format, &options.skeleton) {
+        (Some(Format::Amc), Some(asf_path)) => Some(asf::read(asf_path)?),
+        _ => None,
+    };
+    let bytes = read_bytes(path)?;
+    match format {
+        Some(Format::Bvh) => {
+            let m = bvh::parse(&bytes, path, options.unit)?;
+            with_fps(m, options.fps, path)
+        }
+        Some(Format::Amc) => match skeleton {
+            Some(asf) => amc::parse(&bytes, path, &asf, fps_or_default(options.fps)),
+            None => Err(whole(
+                path,
+                "an AMC clip needs its ASF skeleton (pass it with --skeleton FILE.asf)".into(),
+            )),
+        },
+        Some(Format::Asf) => asf::parse(&bytes, path)?.rest_motion(fps_or_default(options.fps)),
+        Some(Format::Npz) => Err(whole(
+            path,
+            "NPZ is an output format here; load the BVH or AMC it came from".into(),
+        )),
+        None => Err(unknown_extension(path)),
+    }
+}
+
+fn unknown_extension(path: &Path) -> MotionError {
+    whole(
+        path,
+        format!(
+            "unknown file type `{}` (expected .bvh, .amc with an .asf skeleton, or .asf)",
+            path.extension()
+                .map(|e| format!(".{}", e.to_string_lossy()))
+                .unwrap_or_else(|| "(no extension)".into())
+        ),
+    )
+}
+
+fn with_fps(m: Motion, fps: Option<f64>, path: &Path) -> Result<Motion, MotionError> {
+    match fps {
+        None => Ok(m),
+        Some(f) => m
+            .with_frames(f, m.root_translation().to_vec(), m.rotations().to_vec())
+            .map_err(|e| whole(path, e.to_string())),
+    }
+}
+
+/// Save a clip as `.bvh` (in [`bvh::default_unit`]) or `.npz` by extension.
+pub fn save(motion: &Motion, path: impl AsRef<Path>) -> Result<(), MotionError> {
+    let path = path.as_ref();
+    match Format::of(path) {
+        Some(Format::Bvh) => bvh::write_file(motion, path),
+        Some(Format::Npz) => npz::write_motion(motion, &[], path),
+        _ => Err(MotionError::Unsupported(format!(
+            "{}: can only save .bvh or .npz",
+            path.display()
+        ))),
+    }
+}
+
+/// A BVH clip from memory; `label` names it in errors.
+pub fn parse_bvh(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion, MotionError> {
+    bvh::parse(bytes, label, unit)
+}
+
+/// An ASF skeleton from memory.
+pub fn parse_asf(bytes: &[u8], label: impl AsRef<Path>) -> Result<Asf, MotionError> {
+    asf::parse(bytes, label)
+}
+
+/// An AMC clip from memory, for the skeleton `asf`, at `fps` frames per second.
+pub fn parse_amc(
+    bytes: &[u8],
+    label: impl AsRef<Path>,
+    asf: &Asf,
+    fps: f64,
+) -> Result<Motion, MotionError> {
+    amc::parse(bytes, label, asf, fps)
+}
+
+/// A clip from memory, by the extension of `name` (an upload's file name), with
+/// the ASF skeleton's name and bytes for AMC clips; options as in [`load`]
+/// (`options.skeleton` is not used: the skeleton comes as bytes).
+pub fn parse_named(
+    name: &str,
+    bytes: &[u8],
+    skeleton: Option<(&str, &[u8])>,
+    options: &LoadOptions,
+) -> Result<Motion, MotionError> {
+    let path = Path::new(name);
+    match Format::of(path) {
+        Some(Format::Bvh) => with_fps(bvh::parse(bytes, path, options.unit)?, options.fps, path),
+        Some(Format::Amc) => match skeleton {
+            Some((asf_name, asf_bytes)) => {
+                let asf = asf::parse(asf_bytes, asf_name)?;
+                amc::parse(bytes, path, &asf, fps_or_default(options.fps))
+            }
+            None => Err(whole(
+                path,
+                "an AMC clip needs its ASF skeleton uploaded with it".into(),
+            )),
+        },
+        Some(Format::Asf) => asf::parse(bytes, path)?.rest_motion(fps_or_default(options.fps)),
+        Some(Format::Npz) => Err(whole(path, "NPZ is an output format here".into())),
+        None => Err(unknown_extension(path)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dispatch_errors_are_clear() {
+        let opts = LoadOptions::default();
+        let e = parse_named("clip.amc", b"1\n", None, &opts).unwrap_err();
+        assert!(e.to_string().contains("ASF skeleton"), "{e}");
+        let e = parse_named("clip.c3d", b"", None, &opts).unwrap_err();
+        assert!(e.to_string().contains(".c3d"), "{e}");
+        let e = load("/nonexistent/x.bvh", &opts).unwrap_err();
+        assert!(matches!(e, MotionError::Io { .. }));
+        assert_eq!(Format::of(Path::new("A.BVH")), Some(Format::Bvh));
+    }
+}
