@@ -421,3 +421,41 @@ print("ok")
     );
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "ok");
 }
+
+/// The example clips committed with the project load through `io::load`.
+#[test]
+fn example_clips_load() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    let asf = dir.join("HDM_bd.asf");
+    let opts = motion::LoadOptions {
+        skeleton: Some(asf.clone()),
+        ..Default::default()
+    };
+    let kick = motion::load(dir.join("HDM_bd_kickLFront1Reps_001_120.amc"), &opts).unwrap();
+    assert_eq!((kick.frames(), kick.joints(), kick.fps()), (161, 31, 120.0));
+    let jog = motion::load(
+        dir.join("HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"),
+        &opts,
+    )
+    .unwrap();
+    assert_eq!(jog.frames(), 244);
+    let walk = motion::load(dir.join("16_11_walk_veer_left.bvh"), &Default::default()).unwrap();
+    assert_eq!((walk.frames(), walk.joints()), (534, 31));
+    let rest = motion::load(&asf, &Default::default()).unwrap();
+    assert_eq!((rest.frames(), rest.joints()), (1, 31));
+    // Without the skeleton an AMC clip is a clear error.
+    let e = motion::load(
+        dir.join("HDM_bd_kickLFront1Reps_001_120.amc"),
+        &Default::default(),
+    );
+    assert!(e.unwrap_err().to_string().contains("ASF skeleton"));
+    // save() writes both output formats.
+    let out = std::env::temp_dir().join(format!("motion-save-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    motion::save(&kick, out.join("kick.bvh")).unwrap();
+    motion::save(&kick, out.join("kick.npz")).unwrap();
+    let back = motion::load(out.join("kick.bvh"), &Default::default()).unwrap();
+    assert_eq!(back.frames(), 161);
+    assert!(motion::save(&kick, out.join("kick.txt")).is_err());
+    let _ = std::fs::remove_dir_all(&out);
+}
