@@ -275,7 +275,14 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion
                         )
                         .into());
                 }
-                cur.expect("{")?;
+                // Some exporters name end sites (`End Site LeftToe_End`): skip it.
+                let mut brace = false;
+                if cur.line_number() == site_line {
+                    brace = cur.rest_of_line().last() == Some(&&b"{"[..]);
+                }
+                if !brace {
+                    cur.expect("{")?;
+                }
                 cur.expect("OFFSET")?;
                 let x = cur.number("End Site OFFSET x")?;
                 let y = cur.number("End Site OFFSET y")?;
@@ -783,13 +790,18 @@ fn layouts(motion: &Motion) -> Vec<JointLayout> {
                     _ => None,
                 })
                 .collect();
-            let representable = (0..frames).all(|f| {
-                let q = motion.rotation(f, ji);
-                let back = rotation::from_channels(&rot_axes, &rotation::to_channels(q, &rot_axes));
-                // 1e-7 rad: decomposition noise next to gimbal lock stays below it,
-                // any real mismatch (a lost rotation axis) is far above it.
-                rotation::angle_between(q, back) < 1e-7
-            });
+            // One or two rotation channels: Blender's importer reads a value
+            // from the wrong column for the missing ones, so always write three.
+            let partial = matches!(rot_axes.len(), 1 | 2);
+            let representable = !partial
+                && (0..frames).all(|f| {
+                    let q = motion.rotation(f, ji);
+                    let back =
+                        rotation::from_channels(&rot_axes, &rotation::to_channels(q, &rot_axes));
+                    // 1e-7 rad: decomposition noise next to gimbal lock stays below it,
+                    // any real mismatch (a lost rotation axis) is far above it.
+                    rotation::angle_between(q, back) < 1e-7
+                });
             let rot_axes = if representable {
                 rot_axes
             } else {
@@ -869,9 +881,10 @@ pub fn write(motion: &Motion, out: &mut impl Write) -> std::io::Result<()> {
 /// * Each joint keeps its source channels and their order when they can
 ///   express its rotations at every frame. Joints without channels (built in
 ///   code) get `Zrotation Yrotation Xrotation`, the root also `X/Y/Zposition`;
-///   a joint whose rotations need axes it lacks (e.g. after augmentation of an
-///   ASF `dof rx` knee) gets them added after its own, and a root that moves
-///   along an axis without a position channel gets that channel.
+///   a joint with one or two rotation channels gets the missing axes added
+///   after its own (Blender reads partial rotation channels wrongly, and an
+///   augmented clip may rotate about them), and a root that moves along an
+///   axis without a position channel gets that channel.
 /// * The root's position channels hold its world position and its `OFFSET`
 ///   is 0 on those axes, so readers that add the offset and readers that
 ///   ignore it (Blender) agree. Position channels of other joints repeat the
@@ -1061,6 +1074,13 @@ mod tests {
         // Auto: 1.7 units tall body at 170 "units" -> centimetres.
         let auto = parse(SMALL.as_bytes(), "small.bvh", Unit::Auto).unwrap();
         assert_eq!(auto.skeleton().source_unit_m(), 0.01);
+        // Named end sites and braces on the joint line are accepted.
+        let variant = SMALL
+            .replace("\t\tEnd Site\n\t\t{", "\t\tEnd Site LegEnd {")
+            .replace("JOINT Spine\n\t{", "JOINT Spine {");
+        assert!(variant.contains("LegEnd {") && variant.contains("Spine {"));
+        let v = parse(variant.as_bytes(), "variant.bvh", Unit::Centimetres).unwrap();
+        assert_eq!(v.all_world_positions(), m.all_world_positions());
     }
 
     #[test]
@@ -1069,8 +1089,17 @@ mod tests {
         let text = to_bytes(&m);
         let back = parse(&text, "back.bvh", Unit::Auto).unwrap();
         assert_eq!(
+            back.skeleton().joint(2).channels,
+            m.skeleton().joint(2).channels
+        );
+        // A single rotation channel is completed to three, its own first.
+        assert_eq!(
             back.skeleton().joint(1).channels,
-            m.skeleton().joint(1).channels
+            vec![
+                Channel::Rotation(Axis::X),
+                Channel::Rotation(Axis::Z),
+                Channel::Rotation(Axis::Y)
+            ]
         );
         for f in 0..2 {
             for (a, b) in m.world_positions(f).iter().zip(back.world_positions(f)) {
