@@ -23,7 +23,7 @@
 //!   wrong; no input panics and nothing partial is returned.
 //!
 //! The writer produces the standard layout Blender and other tools read (tabs,
-//! `End Site` blocks, `MOTION`, `Frames:`, `Frame Time:`), see [`write`].
+//! `End Site` blocks, `MOTION`, `Frames:`, `Frame Time:`), see [`write()`].
 
 use std::io::Write;
 use std::path::Path;

@@ -50,7 +50,9 @@ pub enum Channel {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JointLimits {
     pub frame: DQuat,
-    /// (axis, min, max) in radians, in composition order.
+    /// (axis, min, max) in radians, in composition order: outermost first, as
+    /// [`crate::rotation::from_channels`] composes them (ASF `dof rx ry rz`,
+    /// which applies x first, is stored as z, y, x).
     pub dofs: Vec<(Axis, f64, f64)>,
 }
 
