@@ -7,12 +7,16 @@
 //! without such names, the leaf joints whose rest position lies in the lowest
 //! 10 % of the body, with their end sites.
 //!
-//! * Foot skating: mean horizontal speed (m/s) of foot points while in ground
-//!   contact. A foot point is in contact at frames `t` and `t+1` when at both its
-//!   height is below `contact_height_m` plus its rest height above the lowest
-//!   foot point (so an ankle, which stands ~8 cm above the sole, gets a
-//!   correspondingly higher threshold) and its vertical speed is below
-//!   `contact_vertical_speed_m_s`. Speeds are forward differences.
+//! * Foot skating: mean horizontal speed (m/s) of the sole points while in
+//!   ground contact. Sole points are the foot points whose rest height is within
+//!   `sole_band_m` of the lowest foot point (toes and toe ends on HDM05/CMU
+//!   skeletons; the ankle, 5-8 cm higher, swings that low too and would count
+//!   swing as contact). A sole point is in contact over the step `t -> t+1` when
+//!   at both frames it is within `contact_band_m` of its own planted height (the
+//!   5th percentile of its height over the clip: toe end sites of real data sit
+//!   a few cm below or above y = 0 when planted) and below `contact_height_m`
+//!   (so a clip floating in the air has no contact), and its vertical speed is
+//!   below `contact_vertical_speed_m_s`. Speeds are forward differences.
 //! * Ground penetration: per frame the depth of the lowest body point below
 //!   y = 0 (0 when above); mean and max over frames.
 //! * Floating: fraction of frames whose lowest body point is higher than
@@ -32,8 +36,12 @@ use crate::skeleton::Transform;
 /// Thresholds of the contact and floating tests.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Thresholds {
-    /// Height (above the point's standing height) under which a foot point may be in contact.
+    /// Height above the ground under which a sole point may be in contact.
     pub contact_height_m: f64,
+    /// Height above its planted height under which a sole point may be in contact.
+    pub contact_band_m: f64,
+    /// Foot points this close (rest height) to the lowest one are sole points.
+    pub sole_band_m: f64,
     /// Vertical speed under which a low foot point is in contact.
     pub contact_vertical_speed_m_s: f64,
     /// Height of the lowest body point above which a frame counts as floating.
@@ -43,7 +51,9 @@ pub struct Thresholds {
 impl Default for Thresholds {
     fn default() -> Self {
         Thresholds {
-            contact_height_m: 0.05,
+            contact_height_m: 0.10,
+            contact_band_m: 0.02,
+            sole_band_m: 0.03,
             contact_vertical_speed_m_s: 0.25,
             floating_height_m: 0.05,
         }
@@ -55,11 +65,11 @@ impl Default for Thresholds {
 pub struct Plausibility {
     pub frames: usize,
     pub fps: f64,
-    /// Joints used as foot points.
+    /// Joints whose positions or end sites are used as sole points.
     pub foot_joints: Vec<String>,
     /// Mean horizontal speed of foot points in contact, m/s (0 without contact).
     pub foot_skating_m_s: f64,
-    /// Fraction of (foot point, frame step) pairs in contact.
+    /// Fraction of (sole point, frame step) pairs in contact.
     pub contact_fraction: f64,
     /// Mean over frames of the lowest point's depth below y = 0, m.
     pub penetration_mean_m: f64,
@@ -120,14 +130,20 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
     let s = motion.skeleton();
     let (n_t, n_j) = (motion.frames(), motion.joints());
     let dt = 1.0 / motion.fps();
-    let feet = foot_points(motion);
     let mut x = vec![Transform::IDENTITY; n_j];
 
-    // Rest heights of foot points above the lowest one.
+    // Sole points: foot points whose rest height is near the lowest one.
     let mut rest_x = vec![Transform::IDENTITY; n_j];
     s.forward(DVec3::ZERO, &vec![glam::DQuat::IDENTITY; n_j], &mut rest_x);
-    let rest_y: Vec<f64> = feet.iter().map(|p| point(&rest_x, *p).y).collect();
-    let rest_lo = rest_y.iter().copied().fold(f64::INFINITY, f64::min);
+    let all_feet = foot_points(motion);
+    let rest_lo = all_feet
+        .iter()
+        .map(|p| point(&rest_x, *p).y)
+        .fold(f64::INFINITY, f64::min);
+    let feet: Vec<(usize, Option<DVec3>)> = all_feet
+        .into_iter()
+        .filter(|p| point(&rest_x, *p).y <= rest_lo + th.sole_band_m)
+        .collect();
 
     let lengths = s.bone_lengths();
     let mut positions = Vec::with_capacity(n_t * n_j);
@@ -157,9 +173,16 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
 
     // Foot skating.
     let nf = feet.len();
+    let planted: Vec<f64> = (0..nf)
+        .map(|i| {
+            let mut ys: Vec<f64> = (0..n_t).map(|t| foot_pos[t * nf + i].y).collect();
+            ys.sort_by(f64::total_cmp);
+            ys[(ys.len() - 1) / 20]
+        })
+        .collect();
     let in_contact = |t: usize, i: usize| {
-        let p = foot_pos[t * nf + i];
-        p.y < th.contact_height_m + (rest_y[i] - rest_lo)
+        let y = foot_pos[t * nf + i].y;
+        y < th.contact_height_m && y < planted[i] + th.contact_band_m
     };
     let (mut speed_sum, mut contacts, mut steps) = (0.0, 0usize, 0usize);
     for t in 0..n_t.saturating_sub(1) {
@@ -281,7 +304,8 @@ mod tests {
         assert!((m.contact_fraction - 1.0).abs() < 1e-12);
         assert_eq!(
             m.foot_joints,
-            ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
+            ["LeftToe", "RightToe"],
+            "ankles are not sole points"
         );
         let still = plausibility(&standing(40, 0.0, 0.0));
         assert!(still.foot_skating_m_s.abs() < 1e-12);

@@ -18,6 +18,19 @@
 //! plane normal: a hinge knee (ASF one-dof `tibia`) stays a pure hinge.
 //! For a straight limb (no plane) the normal comes from the knee's hinge axis:
 //! the file's one-dof axis if it has one, else the clip's average bend normal.
+//!
+//! Joint limits (files that have them, i.e. ASF): if the preferred solution
+//! puts the hip/shoulder, knee/elbow or (in `World` mode) the effector outside
+//! its limits (widened to the source pose's own angles), the knee/elbow is
+//! swivelled about the hip-target line, the one free degree of freedom of a
+//! two-bone limb, in 5 degree steps up to 120 degrees each way, and the first
+//! solution inside the limits is taken; the target is still reached exactly.
+//! If none is, the least violating one is clamped to the limits and the
+//! knee/elbow re-bent about its hinge towards the target (the target is then
+//! missed; the frame is reported as clamped). The knee/elbow rotation is
+//! also projected onto the file's dofs (see [`limits::project_to_dofs`]); on
+//! HDM05 arms that moves the wrist by well under a millimetre, which shows in
+//! the reported error.
 
 use glam::{DMat3, DQuat, DVec3};
 use motion::Skeleton;
@@ -49,6 +62,10 @@ pub struct Limb {
 }
 
 const EPS_LEN: f64 = 1e-6;
+/// Swivel search when the preferred bend plane breaks a joint limit: steps of
+/// 5 degrees up to +-120 degrees about the hip-target line.
+const SWIVEL_STEP: f64 = 5.0 * std::f64::consts::PI / 180.0;
+const SWIVEL_STEPS: usize = 24;
 
 impl Limb {
     /// Find the limb ending at `effector`.
@@ -207,42 +224,105 @@ pub fn solve_frame(
             n_new = wn.any_orthonormal_vector();
         }
     }
-    let n_new = n_new.normalize();
-    let side = wn.cross(n_new); // the knee goes to this side of the hip-goal line
-    let mut knee = h + (thigh - n_new * thigh.dot(n_new));
-    if (knee - h).dot(side) < 1e-3 * l1 {
-        knee = h + (wn + side).normalize() * l1;
-    } else {
-        knee = h + (knee - h).normalize() * l1;
-    }
-    let mut pts = [h, knee, knee + (goal - knee).normalize() * l2];
-    Fabrik::default().solve(&mut pts, goal, Some(n_new));
-    let (k1, e1) = (pts[1], pts[2]);
+    let preferred = n_new.normalize();
 
-    // Positions -> rotations of the upper and lower pivots.
-    let du = frame_map(thigh, n_ref, k1 - h, n_new);
+    // One candidate solution for a bend-plane normal `n`: new local rotations
+    // of the upper pivot, lower pivot and effector.
     let p_upper = skeleton.parent(limb.upper).unwrap_or(0);
-    let r_u = x[limb.upper].rotation;
-    let r_pu = x[p_upper].rotation;
-    let dl = arc(du * shin, e1 - k1);
-    let r_l = x[limb.lower].rotation;
-    let r_pl = x[p_lower].rotation;
+    let (r_u, r_pu) = (x[limb.upper].rotation, x[p_upper].rotation);
+    let (r_l, r_pl) = (x[limb.lower].rotation, x[p_lower].rotation);
     let r_e = x[limb.effector].rotation;
-    pose[limb.upper] = (r_pu.inverse() * du * r_u).normalize();
-    pose[limb.lower] = (r_pl.inverse() * du.inverse() * dl * du * r_l).normalize();
-    if orientation == EffectorOrientation::World {
-        let r_l_new = dl * du * r_l;
-        pose[limb.effector] = (r_l_new.inverse() * r_e).normalize();
-    }
+    let attempt = |n: DVec3| -> [DQuat; 3] {
+        let side = wn.cross(n); // the knee goes to this side of the hip-goal line
+        let mut knee = h + (thigh - n * thigh.dot(n));
+        if (knee - h).dot(side) < 1e-3 * l1 {
+            knee = h + (wn + side).normalize() * l1;
+        } else {
+            knee = h + (knee - h).normalize() * l1;
+        }
+        let mut pts = [h, knee, knee + (goal - knee).normalize() * l2];
+        Fabrik::default().solve(&mut pts, goal, Some(n));
+        let (k1, e1) = (pts[1], pts[2]);
+        // Positions -> rotations of the upper and lower pivots.
+        let du = frame_map(thigh, n_ref, k1 - h, n);
+        let dl = arc(du * shin, e1 - k1);
+        let upper = (r_pu.inverse() * du * r_u).normalize();
+        let mut lower = (r_pl.inverse() * du.inverse() * dl * du * r_l).normalize();
+        if respect_limits && let Some(lim) = &skeleton.joint(limb.lower).limits {
+            lower = limits::project_to_dofs(lower, original[limb.lower], lim);
+        }
+        let effector = match orientation {
+            EffectorOrientation::World => ((dl * du * r_l).inverse() * r_e).normalize(),
+            EffectorOrientation::Local => pose[limb.effector],
+        };
+        [upper, lower, effector]
+    };
+    let joints = [limb.upper, limb.lower, limb.effector];
+    let excess = |q: &[DQuat; 3]| -> f64 {
+        joints
+            .iter()
+            .zip(q)
+            .map(|(&j, &r)| match &skeleton.joint(j).limits {
+                Some(lim) => limits::excess(r, original[j], lim),
+                None => 0.0,
+            })
+            .sum()
+    };
+    // Preferred plane first; if it breaks a limit, swivel the knee/elbow about
+    // the hip-goal line (the one free degree of freedom) in growing steps and
+    // take the first solution inside the limits, else the least violating one,
+    // clamped.
+    let mut best = attempt(preferred);
     let mut clamped = false;
     if respect_limits {
-        for j in [limb.upper, limb.lower, limb.effector] {
-            if let Some(lim) = &skeleton.joint(j).limits {
-                let (q, c) = limits::clamp(pose[j], original[j], lim);
-                pose[j] = q;
-                clamped |= c;
+        let mut worst = excess(&best);
+        if worst > 0.0 {
+            let mut least = (worst, best);
+            'search: for i in 1..=SWIVEL_STEPS {
+                let delta = i as f64 * SWIVEL_STEP;
+                for a in [delta, -delta] {
+                    let q = attempt(DQuat::from_axis_angle(wn, a) * preferred);
+                    let x = excess(&q);
+                    if x < least.0 {
+                        least = (x, q);
+                    }
+                    if x == 0.0 {
+                        break 'search;
+                    }
+                }
             }
+            (worst, best) = least;
         }
+        if worst > 0.0 {
+            for (k, &j) in joints.iter().enumerate() {
+                if let Some(lim) = &skeleton.joint(j).limits {
+                    best[k] = limits::clamp(best[k], original[j], lim).0;
+                }
+            }
+            // With the hip/shoulder clamped, re-bend the knee/elbow about its
+            // hinge to bring the effector as close to the goal as it gets.
+            if let Some(hinge) = limb.hinge_local {
+                let d = (r_pu * best[0]) * r_u.inverse(); // world change of u's subtree
+                let k_new = h + d * thigh;
+                let frame_pl = d * r_pl;
+                let a = (frame_pl * hinge).normalize();
+                let shin_new = frame_pl * best[1] * skeleton.joint(limb.effector).offset;
+                let flat = |v: DVec3| v - a * v.dot(a);
+                let (from, to) = (flat(shin_new), flat(goal - k_new));
+                if from.length() > 1e-9 && to.length() > 1e-9 {
+                    let theta = from.cross(to).dot(a).atan2(from.dot(to));
+                    let bent = DQuat::from_axis_angle(hinge.normalize(), theta) * best[1];
+                    best[1] = match &skeleton.joint(limb.lower).limits {
+                        Some(lim) => limits::clamp(bent, original[limb.lower], lim).0,
+                        None => bent,
+                    };
+                }
+            }
+            clamped = true;
+        }
+    }
+    for (k, &j) in joints.iter().enumerate() {
+        pose[j] = best[k];
     }
     FrameEdit {
         out_of_reach,
