@@ -1,1 +1,60 @@
-fn main() {}
+//! `motionaug`: the whole product in one process, no Postgres, no Redis.
+//!
+//! Each subcommand lives in its own module under `commands/`; this file only
+//! parses arguments, sets up logging and dispatches.
+
+mod commands;
+mod input;
+mod output;
+mod progress;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "motionaug",
+    version,
+    about = "Motion-capture data augmentation"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print frames, frame rate, duration and joints of a clip.
+    Inspect(commands::inspect::Args),
+    /// Convert a clip to BVH or NPZ, optionally resampling it.
+    Convert(commands::convert::Args),
+    /// Synthesise new clips from a recipe (noise, time warp, mirror, masks, IK).
+    Augment(commands::augment::Args),
+    /// Physical plausibility metrics of a clip (foot skating, penetration, ...).
+    Metrics(commands::metrics::Args),
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Inspect(args) => commands::inspect::run(args),
+        Command::Convert(args) => commands::convert::run(args),
+        Command::Augment(args) => commands::augment::run(args),
+        Command::Metrics(args) => commands::metrics::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

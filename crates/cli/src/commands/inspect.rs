@@ -1,0 +1,63 @@
+//! `motionaug inspect FILE`: what is in a clip.
+
+use std::fmt::Write;
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::input::ClipArgs;
+use crate::output::print_stdout;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// A BVH or AMC clip (AMC needs --skeleton).
+    file: PathBuf,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Print JSON: frames, fps, duration_s, joints, joint_names.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct Summary {
+    frames: usize,
+    fps: f64,
+    duration_s: f64,
+    joints: usize,
+    joint_names: Vec<String>,
+    /// Height of the rest pose, metres.
+    rest_height_m: f64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let motion = args.clip.load(&args.file)?;
+    let skeleton = motion.skeleton();
+    let summary = Summary {
+        frames: motion.frames(),
+        fps: motion.fps(),
+        duration_s: motion.duration_s(),
+        joints: motion.joints(),
+        joint_names: skeleton.joints().iter().map(|j| j.name.clone()).collect(),
+        rest_height_m: skeleton.rest_height(),
+    };
+    let mut text = String::new();
+    if args.json {
+        text = serde_json::to_string_pretty(&summary)? + "\n";
+    } else {
+        writeln!(text, "file:        {}", args.file.display())?;
+        writeln!(text, "frames:      {}", summary.frames)?;
+        writeln!(text, "fps:         {}", summary.fps)?;
+        writeln!(text, "duration:    {:.3} s", summary.duration_s)?;
+        writeln!(text, "rest height: {:.3} m", summary.rest_height_m)?;
+        writeln!(text, "joints:      {}", summary.joints)?;
+        for (i, joint) in skeleton.joints().iter().enumerate() {
+            let parent = joint
+                .parent
+                .map(|p| skeleton.joint(p).name.as_str())
+                .unwrap_or("-");
+            writeln!(text, "  {i:3} {:<24} parent {parent}", joint.name)?;
+        }
+    }
+    print_stdout(&text)
+}

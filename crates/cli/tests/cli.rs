@@ -1,0 +1,257 @@
+//! The `motionaug` binary end to end, on the bundled example clips.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use motion::io::{LoadOptions, load};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn example(name: &str) -> PathBuf {
+    root().join("examples/data").join(name)
+}
+
+fn motionaug(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_motionaug"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("the motionaug binary runs")
+}
+
+fn ok(output: Output) -> String {
+    assert!(
+        output.status.success(),
+        "motionaug failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout).expect("stdout is UTF-8")
+}
+
+fn failed(output: Output) -> String {
+    assert!(!output.status.success(), "motionaug should have failed");
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+const KICK: &str = "examples/data/HDM_bd_kickLFront1Reps_001_120.amc";
+const JOG: &str = "examples/data/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc";
+const ASF: &str = "examples/data/HDM_bd.asf";
+
+#[test]
+fn inspect_json_has_the_documented_keys() {
+    let text = ok(motionaug(&["inspect", KICK, "--skeleton", ASF, "--json"]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["fps"], 120.0);
+    let frames = v["frames"].as_u64().unwrap();
+    assert!(frames > 100);
+    let duration = v["duration_s"].as_f64().unwrap();
+    assert!((duration - frames as f64 / 120.0).abs() < 1e-9);
+    assert_eq!(v["joints"], 31);
+    assert_eq!(v["joint_names"].as_array().unwrap().len(), 31);
+    assert_eq!(v["joint_names"][0], "root");
+}
+
+#[test]
+fn amc_without_skeleton_is_a_clear_error() {
+    let err = failed(motionaug(&["inspect", KICK]));
+    assert!(err.contains("--skeleton"), "{err}");
+}
+
+#[test]
+fn bad_bvh_names_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.bvh");
+    std::fs::write(
+        &bad,
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n  CHANNELS 3 Xrotation Yrotation Zrotation\n}\n",
+    )
+    .unwrap();
+    let err = failed(motionaug(&["inspect", bad.to_str().unwrap()]));
+    assert!(err.contains("bad.bvh:4"), "{err}");
+}
+
+#[test]
+fn convert_resamples_and_writes_bvh_and_npz() {
+    let dir = tempfile::tempdir().unwrap();
+    let bvh = dir.path().join("kick30.bvh");
+    let npz = dir.path().join("kick30.npz");
+    for out in [&bvh, &npz] {
+        let out = out.to_str().unwrap();
+        ok(motionaug(&[
+            "convert",
+            KICK,
+            out,
+            "--skeleton",
+            ASF,
+            "--fps",
+            "30",
+        ]));
+    }
+    let source = load(
+        root().join(KICK),
+        &LoadOptions {
+            skeleton: Some(root().join(ASF)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let converted = load(&bvh, &LoadOptions::default()).unwrap();
+    assert_eq!(converted.fps(), 30.0);
+    assert!((converted.duration_s() - source.duration_s()).abs() <= 1.0 / 30.0 + 1e-9);
+    let arrays = motion::npz::read(&std::fs::read(&npz).unwrap()).unwrap();
+    let positions = arrays.iter().find(|a| a.name == "positions").unwrap();
+    assert_eq!(positions.shape, vec![converted.frames(), 31, 3]);
+}
+
+#[test]
+fn augment_writes_every_output_and_a_manifest_reproducibly() {
+    let a = tempfile::tempdir().unwrap();
+    let b = tempfile::tempdir().unwrap();
+    let run = |dir: &Path, seed: &str| {
+        ok(motionaug(&[
+            "augment",
+            KICK,
+            JOG,
+            "--skeleton",
+            ASF,
+            "--recipe",
+            "examples/recipes/kinematic.toml",
+            "--out",
+            dir.to_str().unwrap(),
+            "--seed",
+            seed,
+        ]))
+    };
+    run(a.path(), "11");
+    run(b.path(), "11");
+    let manifest: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(a.path().join("manifest.json")).unwrap()).unwrap();
+    let recipe = synth::Recipe::from_toml_str(
+        &std::fs::read_to_string(root().join("examples/recipes/kinematic.toml")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(manifest.len(), 2 * recipe.outputs_per_clip());
+    for entry in &manifest {
+        let file = entry["file"].as_str().unwrap();
+        for keys in ["source", "op", "params"] {
+            assert!(!entry[keys].is_null(), "{keys} missing in {entry}");
+        }
+        let bytes_a = std::fs::read(a.path().join(file)).unwrap();
+        let bytes_b = std::fs::read(b.path().join(file)).unwrap();
+        assert!(
+            bytes_a == bytes_b,
+            "{file} differs between two runs with one seed"
+        );
+        assert!(a.path().join(file.replace(".bvh", ".npz")).exists());
+    }
+    let c = tempfile::tempdir().unwrap();
+    run(c.path(), "12");
+    let noise = manifest.iter().find(|e| e["op"] == "noise").unwrap()["file"]
+        .as_str()
+        .unwrap();
+    assert_ne!(
+        std::fs::read(a.path().join(noise)).unwrap(),
+        std::fs::read(c.path().join(noise)).unwrap(),
+        "another seed must give another output"
+    );
+}
+
+#[test]
+fn ik_outputs_reach_their_targets_through_the_written_bvh() {
+    let dir = tempfile::tempdir().unwrap();
+    ok(motionaug(&[
+        "augment",
+        KICK,
+        "--skeleton",
+        ASF,
+        "--recipe",
+        "examples/recipes/ik_kick.toml",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--seed",
+        "5",
+    ]));
+    let manifest: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(dir.path().join("manifest.json")).unwrap()).unwrap();
+    let source = load(
+        root().join(KICK),
+        &LoadOptions {
+            skeleton: Some(root().join(ASF)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let rest = source.skeleton().bone_lengths();
+    assert!(!manifest.is_empty());
+    for entry in &manifest {
+        assert_eq!(entry["op"], "ik");
+        let out = load(
+            dir.path().join(entry["file"].as_str().unwrap()),
+            &LoadOptions::default(),
+        )
+        .unwrap();
+        let effector = out
+            .skeleton()
+            .require(entry["effector"].as_str().unwrap())
+            .unwrap();
+        let key = entry["keyframe"].as_u64().unwrap() as usize;
+        let target: Vec<f64> = serde_json::from_value(entry["target"].clone()).unwrap();
+        let reached = out.world_positions(key)[effector];
+        let error = (reached - motion::glam::DVec3::new(target[0], target[1], target[2])).length();
+        assert!(
+            error < 0.01,
+            "{}: effector {error} m from its target",
+            entry["file"]
+        );
+        for t in [0, key, out.frames() - 1] {
+            let p = out.world_positions(t);
+            for (j, joint) in out.skeleton().joints().iter().enumerate().skip(1) {
+                let length = (p[j] - p[joint.parent.unwrap()]).length();
+                assert!(
+                    (length - rest[j]).abs() < 1e-4,
+                    "bone {} changed length",
+                    joint.name
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_recipe_names_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = dir.path().join("r.toml");
+    std::fs::write(&recipe, "[[ops]]\nop = \"noise\"\nsigma_deg = -1.0\n").unwrap();
+    let err = failed(motionaug(&[
+        "augment",
+        KICK,
+        "--skeleton",
+        ASF,
+        "--recipe",
+        recipe.to_str().unwrap(),
+        "--out",
+        dir.path().join("o").to_str().unwrap(),
+    ]));
+    assert!(err.contains("sigma_deg"), "{err}");
+}
+
+#[test]
+fn metrics_json_reports_plausibility() {
+    let text = ok(motionaug(&["metrics", JOG, "--skeleton", ASF, "--json"]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(
+        v["foot_joints"].as_array().is_some_and(|f| !f.is_empty()),
+        "{v}"
+    );
+    assert!(v.as_object().unwrap().len() > 5);
+}
+
+#[test]
+fn bvh_examples_work_without_a_skeleton() {
+    let file = example("16_11_walk_veer_left.bvh");
+    let text = ok(motionaug(&["inspect", file.to_str().unwrap(), "--json"]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["fps"], 120.0);
+}
