@@ -73,6 +73,12 @@ pub fn parse(
         })
         .collect();
 
+    let by_name: std::collections::HashMap<Vec<u8>, usize> = asf
+        .bones
+        .iter()
+        .enumerate()
+        .map(|(b, bone)| (bone.name.as_bytes().to_ascii_lowercase(), b))
+        .collect();
     let mut angle_rad = asf.angle_rad;
     let mut root_translation: Vec<DVec3> = Vec::new();
     let mut rotations: Vec<DQuat> = Vec::new();
@@ -172,8 +178,9 @@ pub fn parse(
             rotations[frame * joints] = local_rotation(asf.root.frame, &axes, &angles);
             continue;
         }
-        let b = asf
-            .bone(first)
+        let b = by_name
+            .get(&first.to_ascii_lowercase())
+            .copied()
             .ok_or_else(|| err(format!("unknown bone `{}` (not in the ASF)", show(first))))?;
         if seen[b] {
             return Err(err(format!(

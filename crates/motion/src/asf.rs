@@ -604,13 +604,11 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>) -> Result<Asf, MotionError> 
 
     // Finish the bones.
     let mut out_bones = Vec::with_capacity(bones.len());
+    let mut seen_names = std::collections::HashSet::new();
     for b in bones {
         let name = b.name.unwrap_or_default();
         let at = |m: String| -> MotionError { errors.at(b.line, m).into() };
-        if out_bones
-            .iter()
-            .any(|o: &AsfBone| o.name.eq_ignore_ascii_case(&name))
-        {
+        if !seen_names.insert(name.to_ascii_lowercase()) {
             return Err(at(format!("bone name `{name}` appears twice")));
         }
         let direction = b
@@ -683,14 +681,16 @@ fn build_skeleton(
     errors: &Errors,
 ) -> Result<(Skeleton, Vec<usize>), MotionError> {
     // Node 0 is the root, node b + 1 is bone b.
+    let by_name: std::collections::HashMap<Vec<u8>, usize> = bones
+        .iter()
+        .enumerate()
+        .map(|(b, bone)| (bone.name.as_bytes().to_ascii_lowercase(), b + 1))
+        .collect();
     let node = |name: &[u8]| -> Option<usize> {
         if name.eq_ignore_ascii_case(b"root") {
             Some(0)
         } else {
-            bones
-                .iter()
-                .position(|b| b.name.as_bytes().eq_ignore_ascii_case(name))
-                .map(|b| b + 1)
+            by_name.get(&name.to_ascii_lowercase()).copied()
         }
     };
     let mut children: Vec<Vec<usize>> = vec![Vec::new(); bones.len() + 1];

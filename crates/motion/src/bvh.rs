@@ -184,6 +184,8 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion
     // --- HIERARCHY ---
     cur.expect("HIERARCHY")?;
     let mut joints: Vec<RawJoint> = Vec::new();
+    // Joint name -> line of its declaration.
+    let mut names: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
     let mut stack: Vec<usize> = Vec::new();
     let mut started = false;
     loop {
@@ -240,11 +242,11 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion
                     .map(|t| String::from_utf8_lossy(t).into_owned())
                     .collect::<Vec<_>>()
                     .join(" ");
-                if let Some(prev) = joints.iter().find(|j| j.name == name) {
+                if let Some(prev) = names.insert(name.clone(), line) {
                     return Err(errors
                         .at(
                             line,
-                            format!("joint name `{name}` was already used on line {}", prev.line),
+                            format!("joint name `{name}` was already used on line {prev}"),
                         )
                         .into());
                 }
@@ -483,21 +485,20 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion
 
     // --- frame data: one frame per non-blank line ---
     let channel_count: usize = joints.iter().map(|j| j.channels.len()).sum();
+    if channel_count == 0 {
+        return Err(errors
+            .at(
+                motion_line,
+                "no joint has CHANNELS: there is nothing to animate",
+            )
+            .into());
+    }
     // Line numbers are 1-based indices into `lines`: data starts after the frame time.
     let data_lines: Vec<&Line> = lines[frame_time.1.min(lines.len())..]
         .iter()
         .filter(|l| !l.is_blank())
         .collect();
-    if channel_count == 0 {
-        if let Some(l) = data_lines.first() {
-            return Err(errors
-                .at(
-                    l.number,
-                    "frame data in a file whose joints have no channels",
-                )
-                .into());
-        }
-    } else if data_lines.len() != frames_declared {
+    if data_lines.len() != frames_declared {
         return Err(if data_lines.len() > frames_declared {
             errors.at(
                 data_lines[frames_declared].number,
@@ -519,7 +520,7 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>, unit: Unit) -> Result<Motion
     }
     let frames = frames_declared;
     let mut values = vec![0.0f64; frames * channel_count];
-    if channel_count > 0 {
+    {
         for (f, line) in data_lines.iter().enumerate() {
             let row = &mut values[f * channel_count..(f + 1) * channel_count];
             let mut n = 0;
@@ -1138,6 +1139,12 @@ mod tests {
         let e = err(&SMALL.replace("JOINT Spine", "JOINT Leg"));
         assert!(e.message.contains("already used on line 6"), "{e}");
         assert!(err("").message.contains("HIERARCHY"));
+        let e = err(&SMALL.replace("Frames: 2", "Frames: 99999999999999"));
+        assert!(e.message.contains("after 2 frames"), "{e}");
+        let e = err(
+            "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n}\nMOTION\nFrames: 99999999999\nFrame Time: 0.1\n",
+        );
+        assert!(e.message.contains("nothing to animate"), "{e}");
         assert!(
             err(&SMALL.replace("CHANNELS 1 Xrotation", "CHANNELS 1 Qrotation"))
                 .message
