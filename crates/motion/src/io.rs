@@ -28,9 +28,9 @@ pub struct LoadOptions {
     pub skeleton: Option<PathBuf>,
     /// Length unit of BVH files ([`Unit::Auto`] guesses from the body size).
     pub unit: Unit,
-    /// Frame rate: the rate of AMC clips, which carry none (default
-    /// [`amc::DEFAULT_FPS`], 120 Hz); for BVH, replaces the file's `Frame Time`;
-    /// for an ASF rest pose, its rate (default 120).
+    /// Frame rate of clips whose files carry none: AMC clips and an ASF rest
+    /// pose (default [`amc::DEFAULT_FPS`], 120 Hz). BVH files always keep their
+    /// own `Frame Time` (resample with [`crate::resample`] to change it).
     pub fps: Option<f64>,
 }
 
@@ -87,10 +87,7 @@ pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Motion, Mot
     };
     let bytes = read_bytes(path)?;
     match format {
-        Some(Format::Bvh) => {
-            let m = bvh::parse(&bytes, path, options.unit)?;
-            with_fps(m, options.fps, path)
-        }
+        Some(Format::Bvh) => bvh::parse(&bytes, path, options.unit),
         Some(Format::Amc) => match skeleton {
             Some(asf) => amc::parse(&bytes, path, &asf, fps_or_default(options.fps)),
             None => Err(whole(
@@ -117,15 +114,6 @@ fn unknown_extension(path: &Path) -> MotionError {
                 .unwrap_or_else(|| "(no extension)".into())
         ),
     )
-}
-
-fn with_fps(m: Motion, fps: Option<f64>, path: &Path) -> Result<Motion, MotionError> {
-    match fps {
-        None => Ok(m),
-        Some(f) => m
-            .with_frames(f, m.root_translation().to_vec(), m.rotations().to_vec())
-            .map_err(|e| whole(path, e.to_string())),
-    }
 }
 
 /// Save a clip as `.bvh` (in [`bvh::default_unit`]) or `.npz` by extension.
@@ -172,7 +160,7 @@ pub fn parse_named(
 ) -> Result<Motion, MotionError> {
     let path = Path::new(name);
     match Format::of(path) {
-        Some(Format::Bvh) => with_fps(bvh::parse(bytes, path, options.unit)?, options.fps, path),
+        Some(Format::Bvh) => bvh::parse(bytes, path, options.unit),
         Some(Format::Amc) => match skeleton {
             Some((asf_name, asf_bytes)) => {
                 let asf = asf::parse(asf_bytes, asf_name)?;
@@ -203,5 +191,13 @@ mod tests {
         let e = load("/nonexistent/x.bvh", &opts).unwrap_err();
         assert!(matches!(e, MotionError::Io { .. }));
         assert_eq!(Format::of(Path::new("A.BVH")), Some(Format::Bvh));
+        // A frame rate for AMC clips leaves a BVH file's own rate alone.
+        let bvh = b"HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Yrotation\n}\nMOTION\nFrames: 1\nFrame Time: 0.04\n5\n";
+        let with_fps = LoadOptions {
+            fps: Some(120.0),
+            ..LoadOptions::default()
+        };
+        let m = parse_named("a.bvh", bvh, None, &with_fps).unwrap();
+        assert!((m.fps() - 25.0).abs() < 1e-9);
     }
 }
