@@ -146,3 +146,34 @@ fn kinematic_recipe_runs_on_hdm05_and_metrics_are_sane() {
         }
     }
 }
+
+fn cmu(name: &str) -> Motion {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/cmu")
+        .join(name);
+    motion::bvh::read(path, motion::Unit::Auto).unwrap()
+}
+
+#[test]
+fn ik_and_mirror_on_cmu_bvh_without_limits() {
+    for (file, foot, hand) in [
+        ("131_01_walk.bvh", "Ankle", "Wrist"),
+        ("16_11_walk_veer_left.bvh", "Foot", "Hand"),
+        ("01_01_forward_jumps.bvh", "Foot", "Hand"),
+    ] {
+        let m = cmu(file);
+        for (preset, part) in [(Preset::Walk, foot), (Preset::Throw, hand)] {
+            let out = ik(&m, &IkParams::preset(preset), &mut rng_from_seed(9)).unwrap();
+            let r = report(&out);
+            eprintln!("{file} {preset:?}: {r:?}");
+            assert!(r.effector.ends_with(part), "{file}: {}", r.effector);
+            assert!(r.reachable && r.error_keyframe_m < 0.01, "{file}: {r:?}");
+            assert!(bone_length_error(&out.motion) < 1e-4);
+        }
+        let out = mirror(&m, &MirrorParams::default(), &mut rng_from_seed(0)).unwrap();
+        assert!(
+            out.sampled["max_asymmetry_m"].as_f64().unwrap() < 0.05,
+            "{file}"
+        );
+    }
+}
