@@ -29,8 +29,10 @@ impl<'a> Line<'a> {
     }
 }
 
-/// Lines of `bytes`, split at `\r\n`, `\n` or a lone `\r`.
+/// Lines of `bytes`, split at `\r\n`, `\n` or a lone `\r`; a leading UTF-8
+/// byte order mark (some Windows exporters write one) is skipped.
 pub(crate) fn lines(bytes: &[u8]) -> Vec<Line<'_>> {
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let mut out = Vec::new();
     let mut start = 0;
     let mut i = 0;
@@ -149,6 +151,12 @@ mod tests {
                 (&b"e"[..], 6)
             ]
         );
+    }
+
+    #[test]
+    fn skips_a_byte_order_mark() {
+        let l = lines(b"\xEF\xBB\xBFHIERARCHY\n");
+        assert_eq!(l[0].bytes, b"HIERARCHY");
     }
 
     #[test]
