@@ -35,7 +35,7 @@ impl Default for Fabrik {
     fn default() -> Self {
         Fabrik {
             tolerance: 1e-10,
-            max_iterations: 200,
+            max_iterations: 1000,
         }
     }
 }
