@@ -177,3 +177,41 @@ fn ik_and_mirror_on_cmu_bvh_without_limits() {
         );
     }
 }
+
+#[test]
+fn lower_body_of_an_asf_skeleton_is_the_two_legs() {
+    let m = clip("dg", "kickLFront1Reps", 13);
+    let s = m.skeleton();
+    let mut legs: Vec<&str> = synth::names::lower_body(s)
+        .unwrap()
+        .into_iter()
+        .map(|j| s.joint(j).name.as_str())
+        .collect();
+    legs.sort_unstable();
+    assert_eq!(
+        legs,
+        [
+            "lfemur",
+            "lfoot",
+            "lhipjoint",
+            "ltibia",
+            "ltoes",
+            "rfemur",
+            "rfoot",
+            "rhipjoint",
+            "rtibia",
+            "rtoes"
+        ]
+    );
+    let feet: Vec<&str> = synth::names::feet(s)
+        .into_iter()
+        .map(|j| s.joint(j).name.as_str())
+        .collect();
+    let hands: Vec<&str> = synth::names::hands(s)
+        .into_iter()
+        .map(|j| s.joint(j).name.as_str())
+        .collect();
+    assert_eq!(feet, ["lfoot", "rfoot"]);
+    assert_eq!(hands.len(), 2);
+    assert!(hands.iter().all(|h| h.ends_with("wrist")), "{hands:?}");
+}
