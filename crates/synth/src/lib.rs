@@ -17,6 +17,43 @@
 //! recipe over one clip with a per-output seed derived from (recipe seed, clip
 //! name, op index, copy index), so results do not depend on the order in which
 //! clips or jobs run. [`ManifestEntry`] describes one output for `manifest.json`.
+//!
+//! How a CLI or a worker drives it:
+//!
+//! ```
+//! use synth::{Recipe, expand_clip, run_job};
+//!
+//! let recipe = Recipe::from_toml_str(r#"
+//!     seed = 7
+//!     [[ops]]
+//!     op = "ik"
+//!     preset = "kick"
+//!     copies = 2
+//!     [[ops]]
+//!     op = "mask"
+//!     mode = "lower_body"
+//! "#)?;
+//! let clip = synth::fixtures::kick(60, 30.0, 30); // a Motion, e.g. from motion::io::load
+//! let seed = recipe.effective_seed(None); // the CLI's --seed wins over the recipe's
+//!
+//! // CLI: all outputs of one clip (run clips in parallel with rayon; each clip's
+//! // outputs do not depend on the others).
+//! let outputs = expand_clip(&recipe, "kick_001", &clip, seed)?;
+//! assert_eq!(outputs.len(), 3);
+//! for g in &outputs {
+//!     // write g.output.motion as `{g.name}.bvh` / `.npz`, g.output.mask beside it
+//!     let entry = g.manifest_entry(format!("{}.bvh", g.name), "kick_001.amc");
+//!     if g.op == "ik" {
+//!         assert!(entry.keyframe.is_some() && entry.target.is_some());
+//!     }
+//! }
+//!
+//! // Worker: one job at a time, same result as in the batch.
+//! let jobs = recipe.jobs("kick_001", seed);
+//! let one = run_job(&recipe, "kick_001", &clip, jobs[1])?;
+//! assert_eq!(one.output.motion, outputs[1].output.motion);
+//! # Ok::<(), synth::SynthError>(())
+//! ```
 
 pub mod error;
 pub mod fixtures;
