@@ -464,3 +464,164 @@ fn example_clips_load() {
     assert!(motion::save(&kick, out.join("kick.txt")).is_err());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+// --- Random ASF/AMC: the joint conversion matches bone-based forward kinematics ---
+
+#[derive(Debug, Clone)]
+struct BoneSpec {
+    parent_pick: usize,
+    direction: [f64; 3],
+    length: f64,
+    axis: [f64; 3],
+    axis_order: Vec<usize>,
+    dofs: Vec<usize>,
+}
+
+fn bone_spec() -> impl Strategy<Value = BoneSpec> {
+    (
+        any::<usize>(),
+        prop::array::uniform3(-1.0f64..1.0),
+        0.5f64..10.0,
+        prop::array::uniform3(-180.0f64..180.0),
+        Just(vec![0usize, 1, 2]).prop_shuffle(),
+        prop::sample::subsequence(vec![0usize, 1, 2], 0..=3).prop_shuffle(),
+    )
+        .prop_filter("direction must not vanish", |t| {
+            DVec3::from_array(t.1).length() > 0.1
+        })
+        .prop_map(
+            |(parent_pick, direction, length, axis, axis_order, dofs)| BoneSpec {
+                parent_pick,
+                direction,
+                length,
+                axis,
+                axis_order,
+                dofs,
+            },
+        )
+}
+
+const XYZ: [&str; 3] = ["x", "y", "z"];
+
+fn asf_text(bones: &[BoneSpec], root_order: &[usize]) -> String {
+    let mut s = String::from(":units\n  length 0.45\n  angle deg\n:root\n   order TX TY TZ");
+    for &a in root_order {
+        s.push_str(&format!(" R{}", XYZ[a].to_uppercase()));
+    }
+    s.push_str("\n   axis XYZ\n   position 0 0 0\n   orientation 0 0 0\n:bonedata\n");
+    for (i, b) in bones.iter().enumerate() {
+        let order: String = b
+            .axis_order
+            .iter()
+            .map(|&a| XYZ[a].to_uppercase())
+            .collect();
+        s.push_str(&format!(
+            "  begin\n    id {}\n    name b{i}\n    direction {} {} {}\n    length {}\n    axis {} {} {} {order}\n",
+            i + 1,
+            b.direction[0],
+            b.direction[1],
+            b.direction[2],
+            b.length,
+            b.axis[0],
+            b.axis[1],
+            b.axis[2]
+        ));
+        if !b.dofs.is_empty() {
+            let dofs: Vec<String> = b.dofs.iter().map(|&a| format!("r{}", XYZ[a])).collect();
+            s.push_str(&format!("    dof {}\n", dofs.join(" ")));
+        }
+        s.push_str("  end\n");
+    }
+    s.push_str(":hierarchy\n  begin\n");
+    for (i, b) in bones.iter().enumerate() {
+        let parent = if i == 0 {
+            "root".to_string()
+        } else {
+            format!("b{}", b.parent_pick % i)
+        };
+        s.push_str(&format!("    {parent} b{i}\n"));
+    }
+    s.push_str("  end\n");
+    s
+}
+
+/// Rotation about `axes` by `deg`, the first listed applied first (ASF).
+fn applied_in_order(axes: &[usize], deg: &[f64]) -> DQuat {
+    axes.iter().zip(deg).fold(DQuat::IDENTITY, |q, (&a, d)| {
+        DQuat::from_axis_angle(AXES[a].unit(), d.to_radians()) * q
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 150, ..ProptestConfig::default() })]
+
+    #[test]
+    fn asf_joints_match_bone_kinematics(
+        bones in prop::collection::vec(bone_spec(), 1..8),
+        root_order in Just(vec![0usize, 1, 2]).prop_shuffle(),
+        values in prop::collection::vec(-170.0f64..170.0, 2 * (6 + 8 * 3)),
+    ) {
+        let asf_src = asf_text(&bones, &root_order);
+        let asf = motion::asf::parse(asf_src.as_bytes(), "r.asf").unwrap();
+        let unit = 0.0254 / 0.45;
+        // Two AMC frames of random values.
+        let mut amc = String::from(":FULLY-SPECIFIED\n:DEGREES\n");
+        let mut v = values.iter();
+        let mut frames = Vec::new();
+        for f in 0..2 {
+            amc.push_str(&format!("{}\n", f + 1));
+            let root: Vec<f64> = (0..6).map(|_| *v.next().unwrap()).collect();
+            amc.push_str(&format!("root {} {} {} {} {} {}\n", root[0], root[1], root[2], root[3], root[4], root[5]));
+            let mut per_bone = Vec::new();
+            for (i, b) in bones.iter().enumerate() {
+                let vals: Vec<f64> = b.dofs.iter().map(|_| *v.next().unwrap()).collect();
+                if !vals.is_empty() {
+                    let text: Vec<String> = vals.iter().map(|x| x.to_string()).collect();
+                    amc.push_str(&format!("b{i} {}\n", text.join(" ")));
+                }
+                per_bone.push(vals);
+            }
+            frames.push((root, per_bone));
+        }
+        let m = motion::amc::parse(amc.as_bytes(), "r.amc", &asf, 120.0).unwrap();
+
+        // Reference: bone-based FK as the CMU code states it. Global bone
+        // rotation G_b = G_parent C M C^-1, bone end = start + length G_b dir.
+        for (f, (root, per_bone)) in frames.iter().enumerate() {
+            let root_pos = DVec3::new(root[0], root[1], root[2]) * unit;
+            // The root's rotation values come in `order`, which is also the order applied.
+            let root_rot = applied_in_order(&root_order, &root[3..6]);
+            let mut global = vec![DQuat::IDENTITY; bones.len()];
+            let mut start = vec![DVec3::ZERO; bones.len()];
+            let mut end = vec![DVec3::ZERO; bones.len()];
+            for (i, b) in bones.iter().enumerate() {
+                let (parent_rot, parent_end) = if i == 0 {
+                    (root_rot, root_pos)
+                } else {
+                    let p = b.parent_pick % i;
+                    (global[p], end[p])
+                };
+                let c = applied_in_order(&b.axis_order, &b.axis_order.iter().map(|&a| b.axis[a]).collect::<Vec<_>>());
+                let mm = applied_in_order(&b.dofs, &per_bone[i]);
+                global[i] = parent_rot * c * mm * c.inverse();
+                start[i] = parent_end;
+                let dir = DVec3::from_array(b.direction).normalize();
+                end[i] = start[i] + global[i] * (dir * b.length * unit);
+            }
+            let world = m.world_positions(f);
+            prop_assert!((world[0] - root_pos).length() < 1e-9);
+            for i in 0..bones.len() {
+                let j = asf.joint_of_bone(i);
+                prop_assert!((world[j] - start[i]).length() < 1e-9, "bone {} start", i);
+            }
+        }
+        // And AMC -> BVH keeps every joint.
+        let back = bvh::parse(&bvh::to_bytes(&m), "r.bvh", Unit::CmuAsf).unwrap();
+        prop_assert!(max_position_error(&m, &back) < 1e-5);
+    }
+
+    #[test]
+    fn npz_reader_never_panics(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        let _ = motion::npz::read(&bytes);
+    }
+}
