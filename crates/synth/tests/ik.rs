@@ -67,6 +67,20 @@ fn kick_preset_reaches_its_target_with_exact_bones() {
         // The target lies in the kick fan around the hip axis.
         assert!((0.8..=1.2).contains(&r.r_scale) && (0.8..=1.2).contains(&r.h_scale));
         assert!(r.theta_offset.abs() <= 0.785);
+        let hip = m.world_positions(r.keyframe)[1];
+        let rel = DVec3::from_array(r.target) - hip;
+        let flat = DVec3::new(rel.x, 0.0, rel.z).length();
+        assert!((flat - r.r_scale * r.key_r_m).abs() < 1e-9);
+        assert!((r.target[1] - r.h_scale * r.key_h_m).abs() < 1e-9);
+        let heading = rel.x.atan2(rel.z);
+        let turn = (heading - r.key_theta - r.theta_offset).rem_euclid(std::f64::consts::TAU);
+        assert!(
+            turn < 1e-9 || turn > std::f64::consts::TAU - 1e-9,
+            "heading {heading}"
+        );
+        let src = m.world_positions(r.keyframe)[3];
+        assert!((r.key_h_m - src.y).abs() < 1e-12);
+        assert_eq!(r.fan, Preset::Kick.fan());
         assert!(bone_length_error(&out.motion) < 1e-9);
         // First and last frames are unchanged (f = 0 there).
         for t in [0, m.frames() - 1] {

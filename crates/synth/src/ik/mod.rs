@@ -226,6 +226,13 @@ pub struct IkReport {
     pub target: [f64; 3],
     /// Effector position at the keyframe in the source, world metres.
     pub source_position: [f64; 3],
+    /// The fan in effect (preset ranges with explicit overrides).
+    pub fan: Fan,
+    /// Keyframe cylindrical coordinates around the hip/shoulder axis: horizontal
+    /// distance (m), height above y = 0 (m), heading (radians, atan2(x, z)).
+    pub key_r_m: f64,
+    pub key_h_m: f64,
+    pub key_theta: f64,
     /// Drawn fan coordinates: r scale, h scale, theta offset (radians).
     pub r_scale: f64,
     pub h_scale: f64,
@@ -430,6 +437,10 @@ pub fn ik(motion: &Motion, params: &IkParams, rng: &mut SynthRng) -> Result<Augm
         keyframe_farthest: key0,
         target: target.to_array(),
         source_position: p_key.to_array(),
+        fan,
+        key_r_m: r0,
+        key_h_m: h0,
+        key_theta: theta0,
         r_scale: draw.0,
         h_scale: draw.1,
         theta_offset: draw.2,
