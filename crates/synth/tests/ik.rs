@@ -75,7 +75,7 @@ fn kick_preset_reaches_its_target_with_exact_bones() {
         let heading = rel.x.atan2(rel.z);
         let turn = (heading - r.key_theta - r.theta_offset).rem_euclid(std::f64::consts::TAU);
         assert!(
-            turn < 1e-9 || turn > std::f64::consts::TAU - 1e-9,
+            !(1e-9..=std::f64::consts::TAU - 1e-9).contains(&turn),
             "heading {heading}"
         );
         let src = m.world_positions(r.keyframe)[3];
