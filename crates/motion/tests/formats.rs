@@ -610,9 +610,9 @@ proptest! {
             }
             let world = m.world_positions(f);
             prop_assert!((world[0] - root_pos).length() < 1e-9);
-            for i in 0..bones.len() {
+            for (i, s) in start.iter().enumerate() {
                 let j = asf.joint_of_bone(i);
-                prop_assert!((world[j] - start[i]).length() < 1e-9, "bone {} start", i);
+                prop_assert!((world[j] - *s).length() < 1e-9, "bone {} start", i);
             }
         }
         // And AMC -> BVH keeps every joint.
