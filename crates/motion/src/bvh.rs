@@ -12,7 +12,10 @@
 //!   guessed from the body size ([`crate::units::guess_unit`]), angles (degrees
 //!   in BVH) to radians;
 //! * the root's world position is its `OFFSET` plus its position channels, as
-//!   most readers do; a root without position channels stays at its `OFFSET`;
+//!   most readers do (Blender takes the channels alone; the root `OFFSET` is 0
+//!   in nearly every file, and the writer makes it 0 on axes with channels so
+//!   both readings agree); a root without position channels stays at its
+//!   `OFFSET`;
 //! * position channels on other joints are supported when they hold still: if
 //!   they repeat the joint's `OFFSET` at every frame (exporters that write six
 //!   channels everywhere, read by Blender as absolute translations) they are
