@@ -798,14 +798,15 @@ fn layouts(motion: &Motion) -> Vec<JointLayout> {
             // from the wrong column for the missing ones, so always write three.
             let partial = matches!(rot_axes.len(), 1 | 2);
             let representable = !partial
-                && (0..frames).all(|f| {
-                    let q = motion.rotation(f, ji);
-                    let back =
-                        rotation::from_channels(&rot_axes, &rotation::to_channels(q, &rot_axes));
-                    // 1e-7 rad: decomposition noise next to gimbal lock stays below it,
-                    // any real mismatch (a lost rotation axis) is far above it.
-                    rotation::angle_between(q, back) < 1e-7
-                });
+                && (rotation::channels_span_all_rotations(&rot_axes)
+                    || (0..frames).all(|f| {
+                        let q = motion.rotation(f, ji);
+                        let angles = rotation::to_channels(q, &rot_axes);
+                        let back = rotation::from_channels(&rot_axes, &angles);
+                        // 1e-7 rad: decomposition noise next to gimbal lock stays
+                        // below it, a lost rotation axis is far above it.
+                        rotation::angle_between(q, back) < 1e-7
+                    }));
             let rot_axes = if representable {
                 rot_axes
             } else {

@@ -57,6 +57,12 @@ fn euler_order(axes: [Axis; 3]) -> Option<glam::EulerRot> {
     })
 }
 
+/// Whether three channels on `axes` can express every rotation (Tait-Bryan
+/// like ZYX or proper Euler like ZXZ), so [`to_channels`] is always exact.
+pub fn channels_span_all_rotations(axes: &[Axis]) -> bool {
+    axes.len() == 3 && euler_order([axes[0], axes[1], axes[2]]).is_some()
+}
+
 /// The first axis not in `used` (X, then Y, then Z).
 fn missing_axis(used: &[Axis]) -> Axis {
     [Axis::X, Axis::Y, Axis::Z]
