@@ -196,8 +196,35 @@ fn hdm05_clips_parse_convert_and_round_trip() {
     let clips = files(&dir, "amc");
     // 210 clips + 5 skeletons = the 215 files of the folder (7 classes, see its README).
     assert_eq!(clips.len(), 210, "expected the 210 HDM05 clips");
+    // The clips are independent: check them on every core (a panic in a
+    // worker fails the test with its message).
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = clips.len().div_ceil(threads);
+    let worst = std::thread::scope(|scope| {
+        let workers: Vec<_> = clips
+            .chunks(chunk)
+            .map(|part| scope.spawn(|| check_hdm05_clips(part, &skeletons)))
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().expect("a clip check failed (see above)"))
+            .fold(0.0, f64::max)
+    });
+    eprintln!(
+        "hdm05: {} clips parsed, checked and round-tripped in {:.2?} on {threads} threads \
+         (worst error {worst:.2e} m)",
+        clips.len(),
+        started.elapsed()
+    );
+}
+
+/// Parse, check the physics of, and round-trip `clips`; the worst AMC -> BVH error.
+fn check_hdm05_clips(
+    clips: &[PathBuf],
+    skeletons: &std::collections::HashMap<String, asf::Asf>,
+) -> f64 {
     let mut worst: f64 = 0.0;
-    for path in &clips {
+    for path in clips {
         let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
         let name = path.display();
         let actor = stem.split('_').nth(1).unwrap();
@@ -252,11 +279,7 @@ fn hdm05_clips_parse_convert_and_round_trip() {
         check_npz(&m, &format!("{name}"));
         check_resample(&m, &format!("{name}"));
     }
-    eprintln!(
-        "hdm05: {} clips parsed, checked and round-tripped in {:.2?} (worst error {worst:.2e} m)",
-        clips.len(),
-        started.elapsed()
-    );
+    worst
 }
 
 /// The NPZ of a clip reads back with the right shapes and positions (float32).
