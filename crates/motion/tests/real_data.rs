@@ -125,6 +125,42 @@ fn cmu_pairs_share_one_world_frame() {
             "frame {f}: hips {horizontal} m apart"
         );
     }
+    // Handshake: hips from about 2 m apart to about 0.7 m, right wrists
+    // closest (about 0.36 m) near frame 124.
+    let a = read("18_01_walk_shake_hands_A.bvh");
+    let b = read("18_01_walk_shake_hands_B.bvh");
+    let hips = |f: usize| {
+        let d = a.root_translation()[f] - b.root_translation()[f];
+        DVec3::new(d.x, 0.0, d.z).length()
+    };
+    let closest_hips = (0..a.frames()).map(hips).fold(f64::INFINITY, f64::min);
+    assert!(
+        (1.7..2.3).contains(&hips(0)),
+        "hips start {} m apart",
+        hips(0)
+    );
+    assert!(
+        (0.55..0.85).contains(&closest_hips),
+        "hips closest {closest_hips} m"
+    );
+    let wrist = |m: &Motion| m.skeleton().find("RightHand").expect("RightHand");
+    let (wa, wb) = (wrist(&a), wrist(&b));
+    let (frame, gap) = (0..a.frames())
+        .map(|f| {
+            (
+                f,
+                (a.world_positions(f)[wa] - b.world_positions(f)[wb]).length(),
+            )
+        })
+        .fold(
+            (0, f64::INFINITY),
+            |best, x| if x.1 < best.1 { x } else { best },
+        );
+    assert!((0.25..0.45).contains(&gap), "right hands closest {gap} m");
+    assert!(
+        (100..150).contains(&frame),
+        "right hands closest at frame {frame}"
+    );
 }
 
 /// The HDM05 physical facts a wrong ASF/AMC convention breaks (checked: the
