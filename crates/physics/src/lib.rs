@@ -1,1 +1,36 @@
-//! placeholder until this crate lands
+//! Physical correction, simulation side: a humanoid built from any mocap
+//! skeleton, simulated with rapier3d, and the imitation environment a policy
+//! learns in (MotionAug Sec. 3.3, DeepMimic with a PD-residual root force).
+//!
+//! * [`character`]: file skeleton -> simulated bodies (mapping rules, shapes, masses, gains).
+//! * [`sim`]: the rapier world, impulse spherical joints, our own stable PD torques.
+//! * [`reference`]: the clip resampled to the control rate, per body, with velocities.
+//! * [`env`]: the imitation environment (observation, action, reward, termination,
+//!   PD-residual / learned / no root force, recording the simulated motion).
+//! * [`bench`]: speed and action-0 tracking figures.
+//!
+//! The crate knows nothing of learning: `reset`/`step` take and return plain `f32` slices.
+
+pub mod bench;
+pub mod character;
+pub mod env;
+pub mod fixtures;
+pub mod reference;
+pub mod sim;
+
+pub use bench::{BenchReport, bench_physics};
+pub use character::{CharacterOptions, CharacterSpec, JointMapping, MappingLine, Role, Side};
+pub use env::{Config, ImitationEnv, Residual, StepInfo, StepResult};
+pub use sim::{BodyState, Sim, SimParams};
+
+#[derive(Debug, thiserror::Error)]
+pub enum PhysicsError {
+    #[error("cannot build a character from this skeleton: {0}")]
+    Character(String),
+    #[error("invalid physics configuration: {0}")]
+    Config(String),
+    #[error("action has {got} values, expected {expected}")]
+    ActionSize { got: usize, expected: usize },
+    #[error(transparent)]
+    Motion(#[from] motion::MotionError),
+}

@@ -1,0 +1,86 @@
+//! Simulation speed and action-0 tracking error on a real clip, for a few
+//! physics steps and solver iteration counts (release mode, one thread):
+//!
+//! `cargo bench -p physics --bench physics [-- CLIP.amc|CLIP.bvh [SKELETON.asf]]`
+//!
+//! Default clip: the HDM05 kick `HDM_bd_kickLFront1Reps_001_120.amc`.
+use std::path::PathBuf;
+
+use motion::io::{LoadOptions, load};
+
+fn main() {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let clip = args
+        .first()
+        .map(PathBuf::from)
+        .unwrap_or_else(|| data.join("hdm05/HDM_bd_kickLFront1Reps_001_120.amc"));
+    let skeleton = args.get(1).map(PathBuf::from).or_else(|| {
+        (clip.extension().is_some_and(|e| e == "amc")).then(|| {
+            let name = clip
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .to_string();
+            let actor = name.split('_').nth(1).unwrap_or("bd").to_string();
+            clip.with_file_name(format!("HDM_{actor}.asf"))
+        })
+    });
+    let motion = match load(
+        &clip,
+        &LoadOptions {
+            skeleton,
+            ..Default::default()
+        },
+    ) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("{e}");
+            std::process::exit(1);
+        }
+    };
+    let configs: Vec<(f32, usize)> = match std::env::var("PHYSICS_BENCH_CONFIGS") {
+        Ok(s) => s
+            .split(',')
+            .filter_map(|c| {
+                let (hz, it) = c.split_once(':')?;
+                Some((1.0 / hz.parse::<f32>().ok()?, it.parse().ok()?))
+            })
+            .collect(),
+        Err(_) => vec![
+            (1.0 / 1200.0, 4),
+            (1.0 / 480.0, 8),
+            (1.0 / 240.0, 8),
+            (1.0 / 240.0, 12),
+            (1.0 / 120.0, 16),
+        ],
+    };
+    println!("clip {} ({:.2} s)", clip.display(), motion.duration_s());
+    for (dt, iters) in configs {
+        let mut cfg = physics::Config::default();
+        cfg.sim.dt = dt;
+        cfg.sim.solver_iterations = iters;
+        cfg.sim.pd = match std::env::var("PHYSICS_BENCH_PD").as_deref() {
+            Ok("stable") => physics::sim::PdMode::StableTorque,
+            Ok("explicit") => physics::sim::PdMode::Explicit,
+            _ => physics::sim::PdMode::Motor,
+        };
+        match physics::bench_physics(&motion, &cfg, 2.0) {
+            Ok(r) => println!(
+                "dt 1/{:.0} iters {:2}: {:6.1} sim s/wall s, {:6.1} us/step, joint error {:.4} rad, falls {} in {} passes, r_imit {:.3}",
+                1.0 / r.dt,
+                r.solver_iterations,
+                r.sim_seconds_per_wall_second,
+                r.us_per_physics_step,
+                r.mean_joint_error_rad,
+                r.falls,
+                r.passes,
+                r.mean_imitation_reward
+            ),
+            Err(e) => println!("dt {dt}: {e}"),
+        }
+    }
+}

@@ -1,0 +1,609 @@
+//! Imitation environment for one reference clip (DeepMimic / MotionAug).
+//!
+//! * **Action**: one residual rotation per non-root body (axis-angle, 3 values):
+//!   PD target = `q_ref(t) * exp(a)`, knee/elbow targets clamped to their hinge
+//!   limits (never tighter than the reference itself). With
+//!   [`Residual::Learned`], 6 more values scaled by 100 are the root force and
+//!   torque (heading frame, RFC style). Action 0 tracks the reference.
+//! * **Control**: the PD target is interpolated between reference frames at
+//!   every physics substep; the root residual force is computed once per
+//!   control step: `F = kp (p_ref - p) + kd (v_ref - v)`,
+//!   `tau = kp_r axis_angle(q_ref q^-1) + kd_r (w_ref - w)` (200/100/100/10).
+//! * **Observation** (heading frame of the root): phase, root height, then per
+//!   body position relative to the root, orientation (6D: first two columns of
+//!   the rotation matrix), linear and angular velocity: `2 + 15 * bodies`.
+//! * **Reward**: `r_imit = 0.5 exp(-2 E_pose) + 0.2 exp(-0.005 E_vel) +
+//!   0.2 exp(-5 E_ee) + 0.1 exp(-100 E_com)`, `r = 0.9 r_imit + 0.1 r_res`,
+//!   `r_res = exp(-0.01 |[F; tau]|)` (1 without residual force). Both are 0 on
+//!   the step that ends in a fall.
+//! * **Termination**: a non-foot body touches the ground while the same body
+//!   of the reference is not within `contact_tolerance` of the floor (a fall),
+//!   or the clip ends.
+//! * **Recording**: every control frame of the *simulated* character is kept and
+//!   [`ImitationEnv::recorded_motion`] writes it back onto the file's skeleton:
+//!   driver joints get the simulated body rotations, merged joints the
+//!   reference's local rotation, the root the simulated pelvis.
+
+use std::sync::Arc;
+
+use glam::{DQuat, DVec3, Mat3, Quat, Vec3};
+use motion::{Motion, Skeleton};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::PhysicsError;
+use crate::character::{CharacterOptions, CharacterSpec, HingeLimit, JointMapping};
+use crate::reference::Reference;
+use crate::sim::{BodyState, Sim, SimParams, axis_angle};
+
+/// Which root force helps the character.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Residual {
+    None,
+    /// PD on the reference root (MotionAug).
+    #[default]
+    Pd,
+    /// 6 extra action dimensions (RFC).
+    Learned,
+}
+
+impl std::str::FromStr for Residual {
+    type Err = PhysicsError;
+    fn from_str(s: &str) -> Result<Self, PhysicsError> {
+        match s {
+            "none" => Ok(Residual::None),
+            "pd" => Ok(Residual::Pd),
+            "learned" => Ok(Residual::Learned),
+            other => Err(PhysicsError::Config(format!(
+                "residual `{other}`: expected pd, none or learned"
+            ))),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Policy / control rate, Hz. The physics step must divide its period.
+    pub control_hz: f64,
+    pub sim: SimParams,
+    pub residual: Residual,
+    /// PD-residual gains: position kp, kd; rotation kp, kd.
+    pub residual_gains: [f32; 4],
+    /// Scale of the learned residual action.
+    pub learned_scale: f32,
+    pub character: CharacterOptions,
+    /// A non-foot body may touch the ground when the reference body is this close to it (m).
+    pub contact_tolerance: f32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            control_hz: 30.0,
+            sim: SimParams::default(),
+            residual: Residual::Pd,
+            residual_gains: [200.0, 100.0, 100.0, 10.0],
+            learned_scale: 100.0,
+            character: CharacterOptions::default(),
+            contact_tolerance: 0.1,
+        }
+    }
+}
+
+impl Config {
+    /// Physics substeps per control step, or an error when the step does not fit.
+    pub fn substeps(&self) -> Result<usize, PhysicsError> {
+        let ratio = 1.0 / (self.control_hz * self.sim.dt as f64);
+        let n = ratio.round();
+        let ok = self.control_hz.is_finite() && self.control_hz > 0.0 && n >= 1.0;
+        if !ok || (ratio - n).abs() > 1e-3 {
+            return Err(PhysicsError::Config(format!(
+                "physics step {} s does not divide the control period 1/{} s",
+                self.sim.dt, self.control_hz
+            )));
+        }
+        Ok(n as usize)
+    }
+}
+
+/// Extra figures of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepInfo {
+    /// |F| of the root residual force applied this step (N).
+    pub residual_force: f32,
+    /// |tau| of the root residual torque (N m).
+    pub residual_torque: f32,
+    pub fell: bool,
+    /// Reference frame index after the step.
+    pub frame: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepResult {
+    pub reward: f32,
+    pub r_imit: f32,
+    pub done: bool,
+    pub info: StepInfo,
+}
+
+/// A recorded simulated frame.
+#[derive(Debug, Clone)]
+struct Recorded {
+    bodies: Vec<(Vec3, Quat)>,
+    frame: usize,
+}
+
+pub struct ImitationEnv {
+    spec: CharacterSpec,
+    config: Config,
+    reference: Reference,
+    sim: Sim,
+    substeps: usize,
+    frame: usize,
+    obs: Vec<f32>,
+    targets: Vec<Quat>,
+    target_vel: Vec<Vec3>,
+    action_rot: Vec<Quat>,
+    weights: Vec<f32>,
+    heading0: f32,
+    recorded: Vec<Recorded>,
+    record: bool,
+}
+
+fn heading_of(rot: Quat, forward: Vec3, heading0: f32) -> Quat {
+    let f = rot * forward;
+    let yaw = f.x.atan2(f.z) - heading0;
+    Quat::from_rotation_y(yaw)
+}
+
+fn exp_map(v: Vec3) -> Quat {
+    let angle = v.length();
+    if angle < 1e-8 {
+        Quat::IDENTITY
+    } else {
+        Quat::from_axis_angle(v / angle, angle)
+    }
+}
+
+/// Clamp a relative rotation to a hinge limit widened to include `reference`.
+fn clamp_hinge(q: Quat, limit: &HingeLimit, reference: Quat) -> Quat {
+    let split = |q: Quat| -> (f32, Vec3) {
+        let v = axis_angle(q);
+        let along = v.dot(limit.axis);
+        (along, v - limit.axis * along)
+    };
+    let (a, s) = split(q);
+    let (ra, rs) = split(reference);
+    let lo = limit.lo.min(ra);
+    let hi = limit.hi.max(ra);
+    let max_swing = limit.swing.max(rs.length());
+    let a = a.clamp(lo, hi);
+    let sl = s.length();
+    let s = if sl > max_swing {
+        s * (max_swing / sl)
+    } else {
+        s
+    };
+    exp_map(limit.axis * a + s)
+}
+
+impl ImitationEnv {
+    pub fn new(motion: &Motion, config: &Config) -> Result<Self, PhysicsError> {
+        let spec = CharacterSpec::build(motion.skeleton().clone(), &config.character)?;
+        Self::with_character(motion, spec, config)
+    }
+
+    pub fn with_character(
+        motion: &Motion,
+        spec: CharacterSpec,
+        config: &Config,
+    ) -> Result<Self, PhysicsError> {
+        let substeps = config.substeps()?;
+        if !Arc::ptr_eq(motion.skeleton(), &spec.skeleton) && **motion.skeleton() != *spec.skeleton
+        {
+            return Err(PhysicsError::Config(
+                "the character was built for another skeleton".into(),
+            ));
+        }
+        let mut sim_params = config.sim;
+        sim_params.friction = config.character.friction;
+        let reference = Reference::new(motion, &spec, config.control_hz);
+        let sim = Sim::new(&spec, sim_params);
+        let n = spec.bodies.len();
+        let weights = spec.bodies.iter().map(|b| b.weight).collect();
+        let heading0 = spec.forward.x.atan2(spec.forward.z);
+        let mut env = ImitationEnv {
+            config: config.clone(),
+            reference,
+            sim,
+            substeps,
+            frame: 0,
+            obs: vec![0.0; 2 + 15 * n],
+            targets: vec![Quat::IDENTITY; n],
+            target_vel: vec![Vec3::ZERO; n],
+            action_rot: vec![Quat::IDENTITY; n],
+            weights,
+            heading0,
+            recorded: Vec::new(),
+            record: true,
+            spec,
+        };
+        env.reset(0.0);
+        Ok(env)
+    }
+
+    pub fn spec(&self) -> &CharacterSpec {
+        &self.spec
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    pub fn reference(&self) -> &Reference {
+        &self.reference
+    }
+
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.obs.len()
+    }
+
+    pub fn act_dim(&self) -> usize {
+        3 * (self.spec.bodies.len() - 1)
+            + if self.config.residual == Residual::Learned {
+                6
+            } else {
+                0
+            }
+    }
+
+    /// Number of control steps of a whole-clip episode started at phase 0.
+    pub fn episode_len(&self) -> usize {
+        self.reference.len() - 1
+    }
+
+    pub fn frame(&self) -> usize {
+        self.frame
+    }
+
+    /// Control steps per simulated second.
+    pub fn control_hz(&self) -> f64 {
+        self.config.control_hz
+    }
+
+    /// Current observation.
+    pub fn obs(&self) -> &[f32] {
+        &self.obs
+    }
+
+    /// Turn recording of simulated frames on or off (on by default).
+    pub fn set_recording(&mut self, on: bool) {
+        self.record = on;
+    }
+
+    /// Reference state initialisation at `phase` in [0, 1] of the clip:
+    /// a fresh world (so rollouts never depend on earlier episodes) with every
+    /// body at the reference pose and velocity.
+    pub fn reset(&mut self, phase: f64) -> &[f32] {
+        let last = self.reference.len() - 2;
+        let k = ((phase.clamp(0.0, 1.0) * last as f64).round() as usize).min(last);
+        self.frame = k;
+        let mut params = self.config.sim;
+        params.friction = self.config.character.friction;
+        self.sim = Sim::new(&self.spec, params);
+        self.sim.set_state(&self.reference.frames[k].bodies);
+        self.recorded.clear();
+        if self.record {
+            self.recorded.reserve(self.reference.len() - k);
+            self.push_record();
+        }
+        self.write_obs();
+        &self.obs
+    }
+
+    /// Reset at a random phase drawn from a generator seeded with `seed`.
+    pub fn reset_seeded(&mut self, seed: u64) -> &[f32] {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let phase: f64 = rng.random();
+        self.reset(phase)
+    }
+
+    /// Reset at a random phase drawn from `rng`.
+    pub fn reset_random(&mut self, rng: &mut impl Rng) -> &[f32] {
+        let phase: f64 = rng.random();
+        self.reset(phase)
+    }
+
+    fn push_record(&mut self) {
+        self.recorded.push(Recorded {
+            bodies: self.sim.state.iter().map(|s| (s.pos, s.rot)).collect(),
+            frame: self.frame,
+        });
+    }
+
+    /// One control step. The new observation is in [`ImitationEnv::obs`].
+    pub fn step(&mut self, action: &[f32]) -> Result<StepResult, PhysicsError> {
+        let expected = self.act_dim();
+        if action.len() != expected {
+            return Err(PhysicsError::ActionSize {
+                got: action.len(),
+                expected,
+            });
+        }
+        let n = self.spec.bodies.len();
+        let k = self.frame;
+        if k + 1 >= self.reference.len() {
+            return Ok(StepResult {
+                done: true,
+                info: StepInfo {
+                    frame: k,
+                    ..Default::default()
+                },
+                ..Default::default()
+            });
+        }
+        for b in 1..n {
+            let a = Vec3::new(
+                action[3 * (b - 1)],
+                action[3 * (b - 1) + 1],
+                action[3 * (b - 1) + 2],
+            );
+            let a = if a.is_finite() { a } else { Vec3::ZERO };
+            self.action_rot[b] = exp_map(a);
+        }
+
+        // Root residual force, once per control step.
+        let root = self.sim.state[0];
+        let (force, torque) = match self.config.residual {
+            Residual::None => (Vec3::ZERO, Vec3::ZERO),
+            Residual::Pd => {
+                let r = &self.reference.frames[k].bodies[0];
+                let [kp, kd, kpr, kdr] = self.config.residual_gains;
+                (
+                    kp * (r.pos - root.pos) + kd * (r.vel - root.vel),
+                    kpr * axis_angle(r.rot * root.rot.inverse()) + kdr * (r.angvel - root.angvel),
+                )
+            }
+            Residual::Learned => {
+                let o = 3 * (n - 1);
+                let h = heading_of(root.rot, self.spec.forward, self.heading0);
+                let s = self.config.learned_scale;
+                let f = Vec3::new(action[o], action[o + 1], action[o + 2]);
+                let t = Vec3::new(action[o + 3], action[o + 4], action[o + 5]);
+                let f = if f.is_finite() { f } else { Vec3::ZERO };
+                let t = if t.is_finite() { t } else { Vec3::ZERO };
+                (h * (f * s), h * (t * s))
+            }
+        };
+
+        let mut fell = false;
+        let inv = 1.0 / self.substeps as f32;
+        for sub in 0..self.substeps {
+            let alpha = sub as f32 * inv;
+            let (f0, f1) = (&self.reference.frames[k], &self.reference.frames[k + 1]);
+            for b in 1..n {
+                let mut r = f1.rel[b];
+                if f0.rel[b].dot(r) < 0.0 {
+                    r = -r;
+                }
+                let q_ref = f0.rel[b].slerp(r, alpha);
+                let mut t = q_ref * self.action_rot[b];
+                if let Some(h) = &self.spec.bodies[b].hinge {
+                    t = clamp_hinge(t, h, q_ref);
+                }
+                self.targets[b] = t;
+                self.target_vel[b] = f0.rel_vel[b].lerp(f1.rel_vel[b], alpha);
+            }
+            self.sim
+                .substep(&self.targets, &self.target_vel, force, torque);
+            if !fell {
+                fell = self.fallen(k + 1);
+            }
+        }
+        self.frame = k + 1;
+        if self.record {
+            self.push_record();
+        }
+        self.write_obs();
+        let r_imit = self.imitation_reward();
+        let r_res = match self.config.residual {
+            Residual::None => 1.0,
+            _ => (-0.01 * (force.length_squared() + torque.length_squared()).sqrt()).exp(),
+        };
+        let (reward, r_imit) = if fell {
+            (0.0, 0.0)
+        } else {
+            (0.9 * r_imit + 0.1 * r_res, r_imit)
+        };
+        Ok(StepResult {
+            reward,
+            r_imit,
+            done: fell || self.frame + 1 >= self.reference.len(),
+            info: StepInfo {
+                residual_force: force.length(),
+                residual_torque: torque.length(),
+                fell,
+                frame: self.frame,
+            },
+        })
+    }
+
+    fn fallen(&self, k: usize) -> bool {
+        let lowest = &self.reference.frames[k].lowest;
+        (0..self.spec.bodies.len()).any(|b| {
+            !self.spec.feet.contains(&b)
+                && lowest[b] > self.config.contact_tolerance
+                && self.sim.touches_ground(b)
+        })
+    }
+
+    /// Imitation reward of the current simulated state against reference frame `self.frame`.
+    pub fn imitation_reward(&self) -> f32 {
+        let r = &self.reference.frames[self.frame];
+        let s = &self.sim.state;
+        let n = s.len();
+        let mut e_pose = 0.0;
+        let mut e_vel = 0.0;
+        for b in 0..n {
+            let (rel, wrel) = match self.spec.bodies[b].parent {
+                Some(p) => (
+                    s[p].rot.inverse() * s[b].rot,
+                    s[p].rot.inverse() * (s[b].angvel - s[p].angvel),
+                ),
+                None => (s[b].rot, s[b].angvel),
+            };
+            let d = r.rel[b].dot(rel).abs().min(1.0);
+            let theta = 2.0 * d.acos();
+            e_pose += self.weights[b] * theta * theta;
+            e_vel += self.weights[b] * (wrel - r.rel_vel[b]).length_squared();
+        }
+        let hs = heading_of(s[0].rot, self.spec.forward, self.heading0).inverse();
+        let hr = heading_of(r.bodies[0].rot, self.spec.forward, self.heading0).inverse();
+        let mut e_ee = 0.0;
+        for &b in &self.spec.end_effectors {
+            let c = self.spec.bodies[b].com_local;
+            let ps = s[b].pos + s[b].rot * c;
+            let pr = r.bodies[b].pos + r.bodies[b].rot * c;
+            let mut ls = hs * (ps - s[0].pos);
+            let mut lr = hr * (pr - r.bodies[0].pos);
+            ls.y = ps.y;
+            lr.y = pr.y;
+            e_ee += (ls - lr).length_squared();
+        }
+        e_ee /= self.spec.end_effectors.len().max(1) as f32;
+        let (_, _, vcom) = self.sim.com();
+        let e_com = 0.1 * (vcom - r.com_vel).length_squared();
+        0.5 * (-2.0 * e_pose).exp()
+            + 0.2 * (-0.005 * e_vel).exp()
+            + 0.2 * (-5.0 * e_ee).exp()
+            + 0.1 * (-100.0 * e_com).exp()
+    }
+
+    fn write_obs(&mut self) {
+        let s = &self.sim.state;
+        let root = s[0];
+        let h = heading_of(root.rot, self.spec.forward, self.heading0).inverse();
+        let last = (self.reference.len() - 1).max(1);
+        let o = &mut self.obs;
+        o[0] = self.frame as f32 / last as f32;
+        o[1] = root.pos.y;
+        let mut i = 2;
+        for st in s.iter() {
+            let p = h * (st.pos - root.pos);
+            let m = Mat3::from_quat(h * st.rot);
+            let v = h * st.vel;
+            let w = h * st.angvel;
+            let vals = [
+                p.x, p.y, p.z, m.x_axis.x, m.x_axis.y, m.x_axis.z, m.y_axis.x, m.y_axis.y,
+                m.y_axis.z, v.x, v.y, v.z, w.x, w.y, w.z,
+            ];
+            o[i..i + 15].copy_from_slice(&vals);
+            i += 15;
+        }
+    }
+
+    /// Per-body mean of the angle between simulated and reference relative
+    /// rotations at the current frame (bodies 1.., radians).
+    pub fn joint_error(&self) -> f32 {
+        let r = &self.reference.frames[self.frame];
+        let s = &self.sim.state;
+        let mut sum = 0.0;
+        let mut count = 0;
+        for b in 1..s.len() {
+            if let Some(p) = self.spec.bodies[b].parent {
+                let rel = s[p].rot.inverse() * s[b].rot;
+                sum += 2.0 * r.rel[b].dot(rel).abs().min(1.0).acos();
+                count += 1;
+            }
+        }
+        sum / count.max(1) as f32
+    }
+
+    /// The simulated frames since the last reset, on the file's own skeleton, at the control rate.
+    pub fn recorded_motion(&self) -> Result<Motion, PhysicsError> {
+        if self.recorded.len() < 2 {
+            return Err(PhysicsError::Config(
+                "fewer than two recorded frames".into(),
+            ));
+        }
+        let sk: &Arc<Skeleton> = &self.spec.skeleton;
+        let nj = sk.len();
+        let pelvis = self.spec.bodies[0].driver;
+        let above: Vec<usize> = {
+            let mut a = sk.ancestors(pelvis);
+            a.reverse();
+            a
+        };
+        let mut roots = Vec::with_capacity(self.recorded.len());
+        let mut rots = Vec::with_capacity(self.recorded.len() * nj);
+        let mut wr = vec![DQuat::IDENTITY; nj];
+        let mut wp = vec![DVec3::ZERO; nj];
+        for rec in &self.recorded {
+            let locals = &self.reference.frames[rec.frame].locals;
+            // Chain from the file root down to the pelvis driver (merged into the pelvis).
+            let (pp, pq) = rec.bodies[0];
+            let (pp, pq) = (pp.as_dvec3(), pq.as_dquat());
+            let mut chain = DQuat::IDENTITY;
+            for &a in &above[1..] {
+                chain *= locals[a];
+            }
+            wr[above[0]] = (pq * chain.inverse()).normalize();
+            for w in above.windows(2) {
+                wr[w[1]] = (wr[w[0]] * locals[w[1]]).normalize();
+            }
+            let mut offset_sum = DVec3::ZERO;
+            for w in above.windows(2) {
+                offset_sum += wr[w[0]] * sk.joint(w[1]).offset;
+            }
+            wp[above[0]] = pp - offset_sum;
+            for w in above.windows(2) {
+                wp[w[1]] = wp[w[0]] + wr[w[0]] * sk.joint(w[1]).offset;
+            }
+            for j in 0..nj {
+                if above.contains(&j) {
+                    continue;
+                }
+                let p = sk.parent(j).unwrap_or(0);
+                match self.spec.joint_map[j] {
+                    JointMapping::Body(b) => {
+                        let (bp, bq) = rec.bodies[b];
+                        wr[j] = bq.as_dquat().normalize();
+                        wp[j] = bp.as_dvec3();
+                    }
+                    JointMapping::MergedInto(_) => {
+                        wr[j] = (wr[p] * locals[j]).normalize();
+                        wp[j] = wp[p] + wr[p] * sk.joint(j).offset;
+                    }
+                }
+            }
+            roots.push(wp[0]);
+            for j in 0..nj {
+                rots.push(match sk.parent(j) {
+                    Some(p) => (wr[p].inverse() * wr[j]).normalize(),
+                    None => wr[j],
+                });
+            }
+        }
+        Ok(Motion::new(
+            sk.clone(),
+            self.config.control_hz,
+            roots,
+            rots,
+        )?)
+    }
+
+    /// Teleport the simulated character (tests and tools; observation refreshed).
+    pub fn set_state_for_test(&mut self, states: &[BodyState]) {
+        self.sim.set_state(states);
+        self.write_obs();
+    }
+
+    /// Current simulated state of every body.
+    pub fn body_states(&self) -> &[BodyState] {
+        &self.sim.state
+    }
+}

@@ -1,0 +1,364 @@
+//! The rapier3d world of one character: bodies, impulse spherical joints, ground,
+//! our own (stable) PD torques and the root residual force.
+//!
+//! Rapier's ball-joint motors drive each axis separately and misbehave for large
+//! rotations; multibody joints are several times slower. So joints are impulse
+//! spherical joints (only the positions are constrained) and each joint gets a
+//! PD torque computed here:
+//!
+//! `tau = (I + c)^-1 I [kp (e - dt (w - w_ref)) + kd (w_ref - w)]`, `c = kp dt^2 + kd dt`
+//!
+//! with `e` the axis-angle from the current to the target relative rotation,
+//! `w` the child's angular velocity relative to its parent (world frame) and `I`
+//! the rest inertia of the child's subtree about the joint, rotated with the
+//! child. This is the implicit ("stable") PD of Tan et al. with the joint
+//! treated as one rigid subtree: the torque already accounts for the velocity
+//! it causes during the step, so high gains do not explode at coarse steps.
+//! Torques are clamped to the joint's limit (by norm) and applied equal and
+//! opposite to child and parent.
+//!
+//! Nothing in [`Sim::substep`] allocates.
+
+use glam::{Mat3, Quat, Vec3};
+use rapier3d::prelude::*;
+
+use crate::character::CharacterSpec;
+
+/// Physics settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimParams {
+    /// Physics step, seconds.
+    pub dt: f32,
+    pub solver_iterations: usize,
+    pub friction: f32,
+    pub gravity: f32,
+    pub pd: PdMode,
+}
+
+impl Default for SimParams {
+    fn default() -> Self {
+        SimParams {
+            dt: 1.0 / 300.0,
+            solver_iterations: 12,
+            friction: 0.9,
+            gravity: 9.8,
+            pd: PdMode::Motor,
+        }
+    }
+}
+
+/// How the joint PD controller is realised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PdMode {
+    /// `tau = kp e + kd (w_ref - w)` as external torques (needs tiny steps).
+    Explicit,
+    /// Implicit PD torques against the rest inertia of the child's subtree.
+    StableTorque,
+    /// The PD law as a velocity target of rapier's joint motors:
+    /// `v* = w_ref + (kp / kd) e`, motor damping `kd`, force limit = torque
+    /// limit. The motor torque is `kd (v* - w) = kp e + kd (w_ref - w)`, but
+    /// solved inside the constraint solver with the whole body (implicitly), so
+    /// it is stable for any step with `dt kp / kd < 2` (all reference gains
+    /// have `kp / kd = 10`). `e` comes from quaternions, never per-axis angles.
+    #[default]
+    Motor,
+}
+
+/// Kinematic state of one body: frame origin (= driver joint), orientation,
+/// origin velocity and angular velocity, world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BodyState {
+    pub pos: Vec3,
+    pub rot: Quat,
+    pub vel: Vec3,
+    pub angvel: Vec3,
+}
+
+pub struct Sim {
+    world: PhysicsWorld,
+    bodies: Vec<RigidBodyHandle>,
+    joints: Vec<Option<ImpulseJointHandle>>,
+    colliders: Vec<ColliderHandle>,
+    ground: ColliderHandle,
+    parent: Vec<Option<usize>>,
+    kp: Vec<f32>,
+    kd: Vec<f32>,
+    limit: Vec<f32>,
+    /// Rest inertia of each body's subtree about its joint (rest frame = world).
+    subtree_inertia: Vec<Mat3>,
+    params: SimParams,
+    /// Current state, refreshed by [`Sim::read_state`].
+    pub state: Vec<BodyState>,
+    /// Torque applied at each joint in the last substep (world frame).
+    pub joint_torque: Vec<Vec3>,
+}
+
+fn quat_log(q: Quat) -> Vec3 {
+    // Axis-angle vector of the shortest rotation.
+    let q = if q.w < 0.0 { -q } else { q };
+    let v = Vec3::new(q.x, q.y, q.z);
+    let s = v.length();
+    if s < 1e-7 {
+        return 2.0 * v;
+    }
+    let angle = 2.0 * s.atan2(q.w);
+    v * (angle / s)
+}
+
+pub(crate) fn axis_angle(q: Quat) -> Vec3 {
+    quat_log(q)
+}
+
+impl Sim {
+    pub fn new(spec: &CharacterSpec, params: SimParams) -> Self {
+        let n = spec.bodies.len();
+        let mut world = PhysicsWorld::new();
+        world.gravity = Vector::new(0.0, -params.gravity, 0.0);
+        world.integration_parameters.dt = params.dt;
+        world.integration_parameters.num_solver_iterations = params.solver_iterations.max(1);
+
+        let ground_body =
+            world.insert_body(RigidBodyBuilder::fixed().translation(Vector::new(0.0, -1.0, 0.0)));
+        let ground_bit = Group::from_bits_truncate(1 << 31);
+        let ground = world.insert_collider(
+            ColliderBuilder::cuboid(100.0, 1.0, 100.0)
+                .friction(params.friction)
+                .collision_groups(InteractionGroups::new(
+                    ground_bit,
+                    Group::ALL,
+                    InteractionTestMode::And,
+                )),
+            Some(ground_body),
+        );
+
+        let mut bodies = Vec::with_capacity(n);
+        let mut joints = Vec::with_capacity(n);
+        let mut colliders = Vec::with_capacity(n);
+        for (b, body) in spec.bodies.iter().enumerate() {
+            let rb = world.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .translation(body.rest_origin + Vec3::Y * 2.0)
+                    .can_sleep(false),
+            );
+            let mut filter = Group::ALL.bits();
+            for &(a, c) in &spec.no_collision {
+                if a == b {
+                    filter &= !(1u32 << c);
+                } else if c == b {
+                    filter &= !(1u32 << a);
+                }
+            }
+            let (shape, local) = body.shape.to_parry();
+            let col = world.insert_collider(
+                ColliderBuilder::new(shape)
+                    .position(local)
+                    .mass(body.mass)
+                    .friction(params.friction)
+                    .collision_groups(InteractionGroups::new(
+                        Group::from_bits_truncate(1 << b),
+                        Group::from_bits_truncate(filter),
+                        InteractionTestMode::And,
+                    )),
+                Some(rb),
+            );
+            joints.push(body.parent.map(|p| {
+                let mut joint = SphericalJointBuilder::new()
+                    .local_anchor1(body.anchor_in_parent)
+                    .local_anchor2(Vec3::ZERO)
+                    .contacts_enabled(false);
+                if params.pd == PdMode::Motor {
+                    for axis in [JointAxis::AngX, JointAxis::AngY, JointAxis::AngZ] {
+                        joint = joint
+                            .motor_model(axis, MotorModel::ForceBased)
+                            .motor_velocity(axis, 0.0, body.kd)
+                            .motor_max_force(axis, body.torque_limit);
+                    }
+                }
+                world.insert_impulse_joint(bodies[p], rb, joint)
+            }));
+            bodies.push(rb);
+            colliders.push(col);
+        }
+
+        // Subtree inertia about each joint, rest pose.
+        let mut subtree_inertia = vec![Mat3::ZERO; n];
+        #[allow(clippy::needless_range_loop)]
+        for b in 0..n {
+            let pivot = spec.bodies[b].rest_origin;
+            let mut total = Mat3::ZERO;
+            for k in 0..n {
+                let mut at = Some(k);
+                let mut inside = false;
+                while let Some(a) = at {
+                    if a == b {
+                        inside = true;
+                        break;
+                    }
+                    at = spec.bodies[a].parent;
+                }
+                if !inside {
+                    continue;
+                }
+                let mp = world.bodies[bodies[k]].mass_properties().local_mprops;
+                let ic = mp.reconstruct_inertia_matrix();
+                let m = mp.mass();
+                let d = spec.bodies[k].rest_origin + mp.local_com - pivot;
+                total += ic + (Mat3::IDENTITY * d.length_squared() - outer(d, d)) * m;
+            }
+            subtree_inertia[b] = total;
+        }
+        Sim {
+            world,
+            bodies,
+            joints,
+            colliders,
+            ground,
+            parent: spec.bodies.iter().map(|b| b.parent).collect(),
+            kp: spec.bodies.iter().map(|b| b.kp).collect(),
+            kd: spec.bodies.iter().map(|b| b.kd).collect(),
+            limit: spec.bodies.iter().map(|b| b.torque_limit).collect(),
+            subtree_inertia,
+            params,
+            state: vec![BodyState::default(); n],
+            joint_torque: vec![Vec3::ZERO; n],
+        }
+    }
+
+    pub fn params(&self) -> &SimParams {
+        &self.params
+    }
+
+    pub fn len(&self) -> usize {
+        self.bodies.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.bodies.is_empty()
+    }
+
+    /// Teleport every body to `states` (origin velocity converted to the centre
+    /// of mass velocity rapier stores) and clear forces.
+    pub fn set_state(&mut self, states: &[BodyState]) {
+        for (b, s) in states.iter().enumerate() {
+            let rb = &mut self.world.bodies[self.bodies[b]];
+            rb.set_position(Pose::from_parts(s.pos, s.rot), true);
+            let com = s.pos + s.rot * rb.mass_properties().local_mprops.local_com;
+            rb.set_linvel(s.vel + s.angvel.cross(com - s.pos), true);
+            rb.set_angvel(s.angvel, true);
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+        self.read_state();
+    }
+
+    /// Refresh [`Sim::state`] from the world.
+    pub fn read_state(&mut self) {
+        for (b, h) in self.bodies.iter().enumerate() {
+            let rb = &self.world.bodies[*h];
+            let pos = rb.translation();
+            self.state[b] = BodyState {
+                pos,
+                rot: *rb.rotation(),
+                vel: rb.velocity_at_point(pos),
+                angvel: rb.angvel(),
+            };
+        }
+    }
+
+    /// Total mass and centre of mass position and velocity.
+    pub fn com(&self) -> (f32, Vec3, Vec3) {
+        let mut m = 0.0;
+        let mut p = Vec3::ZERO;
+        let mut v = Vec3::ZERO;
+        for h in &self.bodies {
+            let rb = &self.world.bodies[*h];
+            let mb = rb.mass();
+            m += mb;
+            p += rb.center_of_mass() * mb;
+            v += rb.linvel() * mb;
+        }
+        (m, p / m, v / m)
+    }
+
+    /// One physics step: PD torques toward `targets` (relative rotation of each
+    /// body in its parent's frame; entry 0 unused) with relative target angular
+    /// velocities `target_vel` (parent frame), plus a root force and torque.
+    /// Call [`Sim::read_state`] before (done by `set_state` and by this method after stepping).
+    pub fn substep(
+        &mut self,
+        targets: &[Quat],
+        target_vel: &[Vec3],
+        root_force: Vec3,
+        root_torque: Vec3,
+    ) {
+        let dt = self.params.dt;
+        for h in &self.bodies {
+            let rb = &mut self.world.bodies[*h];
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+        for b in 1..self.bodies.len() {
+            let Some(p) = self.parent[b] else { continue };
+            let (kp, kd) = (self.kp[b], self.kd[b]);
+            if kp == 0.0 && kd == 0.0 {
+                continue;
+            }
+            let sp = self.state[p];
+            let sb = self.state[b];
+            let rel = sp.rot.inverse() * sb.rot;
+            let e = sp.rot * quat_log(targets[b] * rel.inverse());
+            let w = sb.angvel - sp.angvel;
+            let w_ref = sp.rot * target_vel[b];
+            let mut tau = match self.params.pd {
+                PdMode::Motor => {
+                    // Parent-frame velocity target for the three angular motor axes.
+                    let v =
+                        target_vel[b] + (kp / kd.max(1e-6)) * quat_log(targets[b] * rel.inverse());
+                    if let Some(h) = self.joints[b]
+                        && let Some(j) = self.world.impulse_joints.get_mut(h, false)
+                    {
+                        j.data.set_motor_velocity(JointAxis::AngX, v.x, kd);
+                        j.data.set_motor_velocity(JointAxis::AngY, v.y, kd);
+                        j.data.set_motor_velocity(JointAxis::AngZ, v.z, kd);
+                    }
+                    self.joint_torque[b] = kp * e + kd * (w_ref - w);
+                    continue;
+                }
+                PdMode::StableTorque => {
+                    let rhs = kp * (e - dt * (w - w_ref)) + kd * (w_ref - w);
+                    let r = Mat3::from_quat(sb.rot);
+                    let iw = r * self.subtree_inertia[b] * r.transpose();
+                    let c = kp * dt * dt + kd * dt;
+                    let a = iw + Mat3::IDENTITY * c;
+                    a.inverse() * (iw * rhs)
+                }
+                PdMode::Explicit => kp * e + kd * (w_ref - w),
+            };
+            let lim = self.limit[b];
+            let norm = tau.length();
+            if norm > lim {
+                tau *= lim / norm;
+            }
+            self.joint_torque[b] = tau;
+            self.world.bodies[self.bodies[b]].add_torque(tau, false);
+            self.world.bodies[self.bodies[p]].add_torque(-tau, false);
+        }
+        let root = &mut self.world.bodies[self.bodies[0]];
+        root.add_force(root_force, false);
+        root.add_torque(root_torque, false);
+        self.world.step();
+        self.read_state();
+    }
+
+    /// Whether body `b` touches the ground.
+    pub fn touches_ground(&self, b: usize) -> bool {
+        self.world
+            .narrow_phase
+            .contact_pair(self.ground, self.colliders[b])
+            .is_some_and(|c| c.has_any_active_contact())
+    }
+}
+
+fn outer(a: Vec3, b: Vec3) -> Mat3 {
+    Mat3::from_cols(a * b.x, a * b.y, a * b.z)
+}

@@ -1,0 +1,183 @@
+//! Character, environment and honesty tests on the humanoid built in code.
+
+use physics::fixtures::{cmu_humanoid, sway};
+use physics::{CharacterOptions, CharacterSpec, Config, ImitationEnv, JointMapping, Role, Side};
+
+#[test]
+fn character_of_the_cmu_style_skeleton() {
+    let sk = cmu_humanoid();
+    let spec = CharacterSpec::build(sk.clone(), &CharacterOptions::default()).unwrap();
+    for line in spec.mapping_report() {
+        println!(
+            "{:14} -> {}{}",
+            line.file_joint,
+            line.body,
+            if line.merged { " (merged)" } else { "" }
+        );
+    }
+    for b in &spec.bodies {
+        println!(
+            "{:14} {:?} mass {:.2} shape {:?}",
+            b.name, b.parent, b.mass, b.shape
+        );
+    }
+    println!("no collision {:?}", spec.no_collision);
+    assert_eq!(spec.bodies.len(), 16);
+    assert!((spec.total_mass - 45.0).abs() < 1e-3);
+    let driver = |name: &str| match spec.joint_map[sk.find(name).unwrap()] {
+        JointMapping::Body(b) => Some(spec.bodies[b].role),
+        JointMapping::MergedInto(_) => None,
+    };
+    assert_eq!(driver("Hips"), Some(Role::Pelvis));
+    assert_eq!(driver("LeftHip"), Some(Role::UpperLeg(Side::Left)));
+    assert_eq!(driver("RightKnee"), Some(Role::LowerLeg(Side::Right)));
+    assert_eq!(driver("LeftAnkle"), Some(Role::Foot(Side::Left)));
+    assert_eq!(driver("LeftShoulder"), Some(Role::UpperArm(Side::Left)));
+    assert_eq!(driver("RightElbow"), Some(Role::ForeArm(Side::Right)));
+    assert_eq!(driver("lhand"), Some(Role::Hand(Side::Left)));
+    assert_eq!(driver("lowerback"), Some(Role::Spine));
+    assert_eq!(driver("Chest"), Some(Role::Chest));
+    assert_eq!(driver("lowerneck"), Some(Role::Neck));
+    for merged in [
+        "LHipJoint",
+        "LeftToe",
+        "Chest2",
+        "LeftCollar",
+        "LFingers",
+        "RThumb",
+        "Head",
+    ] {
+        assert_eq!(driver(merged), None, "{merged} should be merged");
+    }
+}
+
+#[test]
+fn standing_sway_is_tracked_with_action_zero() {
+    let motion = sway(cmu_humanoid(), 3.0, 120.0);
+    let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+    let action = vec![0.0; env.act_dim()];
+    let mut err = 0.0;
+    let mut steps = 0;
+    loop {
+        let r = env.step(&action).unwrap();
+        err += env.joint_error();
+        steps += 1;
+        assert!(!r.info.fell, "fell at frame {}", r.info.frame);
+        if r.done {
+            break;
+        }
+    }
+    println!("mean joint error {} over {steps} steps", err / steps as f32);
+    assert!(err / (steps as f32) < 0.1);
+}
+
+#[test]
+fn reward_is_one_at_the_reference_and_falls_with_pose_error() {
+    let motion = sway(cmu_humanoid(), 2.0, 120.0);
+    let env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+    // Right after a reset the simulated state is the reference state.
+    let r0 = env.imitation_reward();
+    assert!(r0 > 0.97, "reward at the reference {r0}");
+    // Bend the elbows away from the reference: the reward must drop, and more for larger errors.
+    let mut errs = Vec::new();
+    for angle in [0.3f32, 0.8] {
+        let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+        let mut states = env.body_states().to_vec();
+        for (b, body) in env.spec().bodies.iter().enumerate() {
+            if matches!(body.role, Role::ForeArm(_) | Role::LowerLeg(_)) {
+                states[b].rot *= glam::Quat::from_rotation_y(angle);
+            }
+        }
+        env.set_state_for_test(&states);
+        errs.push(env.imitation_reward());
+    }
+    assert!(errs[0] < r0 - 0.01 && errs[1] < errs[0], "{r0} {errs:?}");
+}
+
+#[test]
+fn same_seed_same_rollout() {
+    let motion = sway(cmu_humanoid(), 2.0, 120.0);
+    let run = |seed: u64| {
+        let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+        let mut obs = env.reset_seeded(seed).to_vec();
+        let n = env.act_dim();
+        let mut rewards = Vec::new();
+        for k in 0..20 {
+            let action: Vec<f32> = (0..n).map(|i| 0.05 * ((i * 7 + k) as f32).sin()).collect();
+            let r = env.step(&action).unwrap();
+            rewards.push(r.reward);
+            obs.extend_from_slice(env.obs());
+            if r.done {
+                break;
+            }
+        }
+        (obs, rewards)
+    };
+    let a = run(7);
+    let b = run(7);
+    assert_eq!(a, b);
+    let c = run(8);
+    assert_ne!(a.0, c.0);
+}
+
+#[test]
+fn recorded_motion_is_the_simulation_not_the_reference() {
+    let motion = sway(cmu_humanoid(), 2.0, 120.0);
+    let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+    let action = vec![0.0; env.act_dim()];
+    while !env.step(&action).unwrap().done {}
+    let rec = env.recorded_motion().unwrap();
+    assert_eq!(rec.frames(), env.reference().len());
+    let sk = rec.skeleton().clone();
+    let (mut diff, mut count) = (0.0, 0);
+    let mut identical = 0;
+    for f in 0..rec.frames() {
+        let ref_pose = &env.reference().frames[f].locals;
+        for (j, ref_rot) in ref_pose.iter().enumerate() {
+            if let JointMapping::Body(_) = env.spec().joint_map[j] {
+                let a = motion::rotation::angle_between(rec.rotation(f, j), *ref_rot);
+                diff += a;
+                count += 1;
+                if a < 1e-6 {
+                    identical += 1;
+                }
+            }
+        }
+    }
+    let mean = diff / count as f64;
+    println!("mean driver rotation difference {mean}, identical {identical} of {count}");
+    // Close to the reference, but not a copy of it.
+    assert!(mean < 0.1, "{mean}");
+    assert!(
+        identical < count / 10,
+        "{identical} of {count} rotations copied"
+    );
+    // Merged joints keep the reference's local rotation.
+    let toe = sk.find("LeftToe").unwrap();
+    assert!(
+        motion::rotation::angle_between(
+            rec.rotation(5, toe),
+            env.reference().frames[5].locals[toe]
+        ) < 1e-6
+    );
+    // Root follows the simulated pelvis.
+    let pelvis = env.body_states()[0].pos.as_dvec3();
+    assert!((rec.root_translation()[rec.frames() - 1] - pelvis).length() < 1e-4);
+}
+
+#[test]
+fn rejects_wrong_action_sizes_and_bad_steps() {
+    let motion = sway(cmu_humanoid(), 1.0, 120.0);
+    let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
+    assert!(env.step(&[0.0; 3]).is_err());
+    let mut cfg = Config::default();
+    cfg.sim.dt = 1.0 / 250.0;
+    assert!(ImitationEnv::new(&motion, &cfg).is_err());
+    let cfg = Config {
+        residual: physics::Residual::Learned,
+        ..Default::default()
+    };
+    let env = ImitationEnv::new(&motion, &cfg).unwrap();
+    assert_eq!(env.act_dim(), 3 * 15 + 6);
+    assert_eq!(env.obs_dim(), 2 + 15 * 16);
+}
