@@ -4,6 +4,10 @@
 //! `cargo bench -p physics --bench physics [-- CLIP.amc|CLIP.bvh [SKELETON.asf]]`
 //!
 //! Default clip: the HDM05 kick `HDM_bd_kickLFront1Reps_001_120.amc`.
+//! Environment knobs for the measurements in `physics::sim`:
+//! `PHYSICS_BENCH_CONFIGS=120:4,240:3` (step rate : solver iterations),
+//! `PHYSICS_BENCH_ARMATURE=0.05`, `PHYSICS_BENCH_STAB=1`,
+//! `PHYSICS_BENCH_PD=motor|stable|explicit`.
 use std::path::PathBuf;
 
 use motion::io::{LoadOptions, load};
@@ -63,12 +67,18 @@ fn main() {
         let mut cfg = physics::Config::default();
         cfg.sim.dt = dt;
         cfg.sim.solver_iterations = iters;
+        if let Ok(v) = std::env::var("PHYSICS_BENCH_ARMATURE") {
+            cfg.sim.min_inertia = v.parse().unwrap_or(0.0);
+        }
+        if let Ok(v) = std::env::var("PHYSICS_BENCH_STAB") {
+            cfg.sim.stabilization_iterations = v.parse().unwrap_or(1);
+        }
         cfg.sim.pd = match std::env::var("PHYSICS_BENCH_PD").as_deref() {
             Ok("stable") => physics::sim::PdMode::StableTorque,
             Ok("explicit") => physics::sim::PdMode::Explicit,
             _ => physics::sim::PdMode::Motor,
         };
-        match physics::bench_physics(&motion, &cfg, 2.0) {
+        match physics::bench::bench_physics_for(&motion, &cfg, 2.0) {
             Ok(r) => println!(
                 "dt 1/{:.0} iters {:2}: {:6.1} sim s/wall s, {:6.1} us/step, joint error {:.4} rad, falls {} in {} passes, r_imit {:.3}",
                 1.0 / r.dt,
