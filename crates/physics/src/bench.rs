@@ -32,9 +32,15 @@ pub struct BenchReport {
     pub mean_imitation_reward: f64,
 }
 
+/// [`bench_physics_for`] timing at least two seconds of stepping.
+pub fn bench_physics(motion: &Motion, config: &Config) -> Result<BenchReport, PhysicsError> {
+    bench_physics_for(motion, config, 2.0)
+}
+
 /// Track `motion` with action 0 and the PD-residual force on, repeating the
-/// clip until `min_wall_s` seconds of stepping have been timed.
-pub fn bench_physics(
+/// clip until `min_wall_s` seconds of stepping have been timed. A pass that
+/// falls restarts (reference state initialisation) at the next frame.
+pub fn bench_physics_for(
     motion: &Motion,
     config: &Config,
     min_wall_s: f64,
