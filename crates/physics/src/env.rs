@@ -126,13 +126,6 @@ pub struct StepResult {
     pub info: StepInfo,
 }
 
-/// A recorded simulated frame.
-#[derive(Debug, Clone)]
-struct Recorded {
-    bodies: Vec<(Vec3, Quat)>,
-    frame: usize,
-}
-
 pub struct ImitationEnv {
     spec: CharacterSpec,
     config: Config,
@@ -146,7 +139,9 @@ pub struct ImitationEnv {
     action_rot: Vec<Quat>,
     weights: Vec<f32>,
     heading0: f32,
-    recorded: Vec<Recorded>,
+    /// Recorded body poses, `[frame][body]` flattened, and their reference frames.
+    recorded: Vec<(Vec3, Quat)>,
+    recorded_frames: Vec<usize>,
     record: bool,
 }
 
@@ -225,6 +220,7 @@ impl ImitationEnv {
             weights,
             heading0,
             recorded: Vec::new(),
+            recorded_frames: Vec::new(),
             record: true,
             spec,
         };
@@ -297,8 +293,12 @@ impl ImitationEnv {
         self.sim = Sim::new(&self.spec, params);
         self.sim.set_state(&self.reference.frames[k].bodies);
         self.recorded.clear();
+        self.recorded_frames.clear();
         if self.record {
-            self.recorded.reserve(self.reference.len() - k);
+            // Room for the whole episode: stepping never allocates.
+            let frames = self.reference.len() - k;
+            self.recorded.reserve(frames * self.spec.bodies.len());
+            self.recorded_frames.reserve(frames);
             self.push_record();
         }
         self.write_obs();
@@ -319,10 +319,9 @@ impl ImitationEnv {
     }
 
     fn push_record(&mut self) {
-        self.recorded.push(Recorded {
-            bodies: self.sim.state.iter().map(|s| (s.pos, s.rot)).collect(),
-            frame: self.frame,
-        });
+        self.recorded
+            .extend(self.sim.state.iter().map(|s| (s.pos, s.rot)));
+        self.recorded_frames.push(self.frame);
     }
 
     /// One control step. The new observation is in [`ImitationEnv::obs`].
@@ -525,7 +524,7 @@ impl ImitationEnv {
 
     /// The simulated frames since the last reset, on the file's own skeleton, at the control rate.
     pub fn recorded_motion(&self) -> Result<Motion, PhysicsError> {
-        if self.recorded.len() < 2 {
+        if self.recorded_frames.len() < 2 {
             return Err(PhysicsError::Config(
                 "fewer than two recorded frames".into(),
             ));
@@ -538,14 +537,16 @@ impl ImitationEnv {
             a.reverse();
             a
         };
-        let mut roots = Vec::with_capacity(self.recorded.len());
-        let mut rots = Vec::with_capacity(self.recorded.len() * nj);
+        let nb = self.spec.bodies.len();
+        let mut roots = Vec::with_capacity(self.recorded_frames.len());
+        let mut rots = Vec::with_capacity(self.recorded_frames.len() * nj);
         let mut wr = vec![DQuat::IDENTITY; nj];
         let mut wp = vec![DVec3::ZERO; nj];
-        for rec in &self.recorded {
-            let locals = &self.reference.frames[rec.frame].locals;
+        for (i, &frame) in self.recorded_frames.iter().enumerate() {
+            let bodies = &self.recorded[i * nb..(i + 1) * nb];
+            let locals = &self.reference.frames[frame].locals;
             // Chain from the file root down to the pelvis driver (merged into the pelvis).
-            let (pp, pq) = rec.bodies[0];
+            let (pp, pq) = bodies[0];
             let (pp, pq) = (pp.as_dvec3(), pq.as_dquat());
             let mut chain = DQuat::IDENTITY;
             for &a in &above[1..] {
@@ -570,7 +571,7 @@ impl ImitationEnv {
                 let p = sk.parent(j).unwrap_or(0);
                 match self.spec.joint_map[j] {
                     JointMapping::Body(b) => {
-                        let (bp, bq) = rec.bodies[b];
+                        let (bp, bq) = bodies[b];
                         wr[j] = bq.as_dquat().normalize();
                         wp[j] = bp.as_dvec3();
                     }

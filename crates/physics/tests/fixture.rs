@@ -181,3 +181,41 @@ fn rejects_wrong_action_sizes_and_bad_steps() {
     assert_eq!(env.act_dim(), 3 * 15 + 6);
     assert_eq!(env.obs_dim(), 2 + 15 * 16);
 }
+
+#[test]
+fn learned_residual_applies_the_scaled_action_and_env_is_send() {
+    fn assert_send<T: Send>() {}
+    assert_send::<ImitationEnv>();
+    let motion = sway(cmu_humanoid(), 1.0, 120.0);
+    let cfg = Config {
+        residual: physics::Residual::Learned,
+        ..Default::default()
+    };
+    let mut env = ImitationEnv::new(&motion, &cfg).unwrap();
+    let mut action = vec![0.0; env.act_dim()];
+    let n = action.len();
+    action[n - 6] = 0.3;
+    action[n - 5] = 0.4;
+    let r = env.step(&action).unwrap();
+    assert!(
+        (r.info.residual_force - 50.0).abs() < 1e-3,
+        "{}",
+        r.info.residual_force
+    );
+    assert_eq!(r.info.residual_torque, 0.0);
+    // r_res = exp(-0.01 * 50) enters the reward with weight 0.1.
+    assert!((r.reward - (0.9 * r.r_imit + 0.1 * (-0.5f32).exp())).abs() < 1e-5);
+}
+
+#[test]
+fn masses_scale_with_the_requested_total() {
+    let opts = CharacterOptions {
+        total_mass_kg: Some(70.0),
+        ..Default::default()
+    };
+    let heavy = CharacterSpec::build(cmu_humanoid(), &opts).unwrap();
+    let light = CharacterSpec::build(cmu_humanoid(), &CharacterOptions::default()).unwrap();
+    assert!((heavy.total_mass - 70.0).abs() < 1e-3);
+    let ratio = heavy.bodies[1].kp / light.bodies[1].kp;
+    assert!((ratio - 70.0 / 45.0).abs() < 1e-4);
+}
