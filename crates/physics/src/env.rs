@@ -22,7 +22,9 @@
 //! * **Recording**: every control frame of the *simulated* character is kept and
 //!   [`ImitationEnv::recorded_motion`] writes it back onto the file's skeleton:
 //!   driver joints get the simulated body rotations, merged joints the
-//!   reference's local rotation, the root the simulated pelvis.
+//!   reference's local rotation, the root the simulated pelvis, in the file's
+//!   coordinates (the simulated floor is the clip's median-frame foot level,
+//!   see [`crate::reference::Reference`]).
 
 use std::sync::Arc;
 
@@ -581,7 +583,8 @@ impl ImitationEnv {
                     }
                 }
             }
-            roots.push(wp[0]);
+            // Back into the file's coordinates (the reference was shifted onto the simulated floor).
+            roots.push(wp[0] + DVec3::new(0.0, self.reference.floor as f64, 0.0));
             for j in 0..nj {
                 rots.push(match sk.parent(j) {
                     Some(p) => (wr[p].inverse() * wr[j]).normalize(),

@@ -33,6 +33,9 @@ pub struct RefFrame {
 #[derive(Debug, Clone)]
 pub struct Reference {
     pub hz: f64,
+    /// Height of the simulated floor in the file's coordinates: the clip was
+    /// shifted down by this much (see [`Reference::new`]).
+    pub floor: f32,
     pub frames: Vec<RefFrame>,
 }
 
@@ -116,8 +119,11 @@ impl Reference {
             })
             .collect();
         lows.sort_by(f32::total_cmp);
-        let floor = lows[lows.len() / 2];
-        if floor.is_finite() {
+        let mut floor = lows[lows.len() / 2];
+        if !floor.is_finite() {
+            floor = 0.0;
+        }
+        {
             for f in &mut frames {
                 for b in &mut f.bodies {
                     b.pos.y -= floor;
@@ -147,7 +153,7 @@ impl Reference {
                 f.com_vel = com_vel;
             }
         }
-        Reference { hz, frames }
+        Reference { hz, floor, frames }
     }
 
     pub fn len(&self) -> usize {
