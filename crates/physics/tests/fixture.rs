@@ -220,3 +220,29 @@ fn masses_scale_with_the_requested_total() {
     let ratio = heavy.bodies[1].kp / light.bodies[1].kp;
     assert!((ratio - 70.0 / 45.0).abs() < 1e-4);
 }
+
+#[test]
+fn roles_come_from_geometry_when_names_say_nothing() {
+    let sk = cmu_humanoid();
+    let mut joints = sk.joints().to_vec();
+    for (i, j) in joints.iter_mut().enumerate() {
+        j.name = format!("j{i}");
+    }
+    let anon = std::sync::Arc::new(motion::Skeleton::new(joints, 1.0).unwrap());
+    let named = CharacterSpec::build(sk.clone(), &CharacterOptions::default()).unwrap();
+    let spec = CharacterSpec::build(anon, &CharacterOptions::default()).unwrap();
+    let roles = |s: &CharacterSpec| {
+        s.bodies
+            .iter()
+            .map(|b| (b.driver, b.role))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(roles(&spec), roles(&named));
+    assert_eq!(spec.joint_map, named.joint_map);
+    let left_hip = sk.find("LeftHip").unwrap();
+    assert!(
+        spec.bodies
+            .iter()
+            .any(|b| b.driver == left_hip && b.role == Role::UpperLeg(Side::Left))
+    );
+}

@@ -107,6 +107,33 @@ fn hdm05_character_mapping() {
 }
 
 #[test]
+fn every_hdm05_actor_and_cmu_pair_skeleton_builds() {
+    for actor in ["bd", "bk", "dg", "mm", "tr"] {
+        let rest = load(
+            data(&format!("hdm05/HDM_{actor}.asf")),
+            &LoadOptions::default(),
+        )
+        .unwrap();
+        let spec =
+            CharacterSpec::build(rest.skeleton().clone(), &CharacterOptions::default()).unwrap();
+        assert_eq!(spec.bodies.len(), 16, "{actor}");
+    }
+    let dir = data("cmu_pairs");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "bvh") {
+            let m = load(&path, &LoadOptions::default()).unwrap();
+            let spec = CharacterSpec::build(m.skeleton().clone(), &CharacterOptions::default())
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert_eq!(spec.bodies.len(), 16, "{}", path.display());
+            count += 1;
+        }
+    }
+    assert!(count > 0);
+}
+
+#[test]
 fn cmu_character_mapping() {
     for clip in [
         "131_01_walk.bvh",
