@@ -2,7 +2,9 @@
 //!
 //! * **Action**: one residual rotation per non-root body (axis-angle, 3 values):
 //!   PD target = `q_ref(t) * exp(a)`, knee/elbow targets clamped to their hinge
-//!   limits (never tighter than the reference itself). With
+//!   limits (never tighter than the reference itself). Limits act on the
+//!   targets only; the simulated joints themselves are unlimited spherical
+//!   joints (the file's ASF limits are not used). With
 //!   [`Residual::Learned`], 6 more values scaled by 100 are the root force and
 //!   torque (heading frame, RFC style). Action 0 tracks the reference.
 //! * **Control**: the PD target is interpolated between reference frames at

@@ -62,7 +62,9 @@
 //! Most of the time is rapier's joint solver (`JointConstraint::solve`,
 //! `finalize_constraints`: ~50 % in `perf`); our own per-step code is ~3 %.
 //!
-//! Nothing in [`Sim::substep`] allocates (rapier keeps its buffers).
+//! Our code in [`Sim::substep`] and the environment's step allocates nothing;
+//! rapier 0.36 itself makes about 11 small heap allocations per physics step
+//! (counted with a counting global allocator on the sway fixture).
 
 use glam::{Mat3, Quat, Vec3};
 use rapier3d::prelude::*;
