@@ -106,7 +106,8 @@ pub struct RunLimits {
     pub time_budget_s: Option<f64>,
     pub max_iterations: Option<u64>,
     pub max_samples: Option<u64>,
-    /// Write checkpoints here every `checkpoint_every_s` and when the run stops.
+    /// Write checkpoints here every `checkpoint_every_s` (0: after every iteration) and
+    /// when the run stops.
     pub checkpoint_dir: Option<PathBuf>,
     pub checkpoint_every_s: f64,
     /// Checkpoints kept in the directory (at least 1).
@@ -244,83 +245,11 @@ impl<E: Env> Trainer<E> {
     pub fn load_checkpoint(config: PpoConfig, envs: Vec<E>, path: &Path) -> Result<Self> {
         let (meta, tensors) = checkpoint::load(path)?;
         let mut t = Self::new(config, envs, 0)?;
-        let mismatch = |what: &str, saved: String, now: String| {
-            PpoError::checkpoint(
-                path,
-                format!("{what} is {saved} in the checkpoint but {now} now"),
-            )
-        };
-        if (meta.obs_dim, meta.act_dim) != (t.obs_dim, t.act_dim) {
-            return Err(mismatch(
-                "(obs_dim, act_dim)",
-                format!("{:?}", (meta.obs_dim, meta.act_dim)),
-                format!("{:?}", (t.obs_dim, t.act_dim)),
-            ));
-        }
-        let (a, b) = (&meta.config, &t.config);
-        if a.policy.hidden != b.policy.hidden || a.value.hidden != b.value.hidden {
-            return Err(mismatch(
-                "hidden sizes (policy, value)",
-                format!("{:?}", (&a.policy.hidden, &a.value.hidden)),
-                format!("{:?}", (&b.policy.hidden, &b.value.hidden)),
-            ));
-        }
-        if a.policy.learn_log_std != b.policy.learn_log_std {
-            return Err(mismatch(
-                "policy.learn_log_std",
-                a.policy.learn_log_std.to_string(),
-                b.policy.learn_log_std.to_string(),
-            ));
-        }
-        let load_vars = |vars: Vec<(String, Var)>| -> Result<()> {
-            for (name, var) in vars {
-                let src = tensors.get(&name).ok_or_else(|| {
-                    PpoError::checkpoint(path, format!("tensor `{name}` missing"))
-                })?;
-                if src.dims() != var.dims() || src.dtype() != DType::F32 {
-                    return Err(PpoError::checkpoint(
-                        path,
-                        format!(
-                            "tensor `{name}` is {:?} {:?}, expected F32 {:?}",
-                            src.dtype(),
-                            src.dims(),
-                            var.dims()
-                        ),
-                    ));
-                }
-                var.set(src)?;
-            }
-            Ok(())
-        };
-        load_vars(t.policy.vars())?;
-        load_vars(t.value.vars())?;
+        t.apply_weights(path, &meta, &tensors)?;
         t.policy_opt
             .load_state("opt.policy", &tensors, meta.policy_opt_steps)?;
         t.value_opt
             .load_state("opt.value", &tensors, meta.value_opt_steps)?;
-        let get64 = |name: &str| -> Result<Vec<f64>> {
-            let v = tensors
-                .get(name)
-                .ok_or_else(|| PpoError::checkpoint(path, format!("tensor `{name}` missing")))?;
-            Ok(v.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
-        };
-        let count = get64("norm.count")?;
-        let count = *count
-            .first()
-            .ok_or_else(|| PpoError::checkpoint(path, "tensor `norm.count` is empty"))?;
-        t.norm = RunningNorm::from_parts(
-            count,
-            get64("norm.mean")?,
-            get64("norm.m2")?,
-            t.config.obs_clip,
-        )
-        .map_err(|e| PpoError::checkpoint(path, e.to_string()))?;
-        if t.norm.dim() != t.obs_dim {
-            return Err(PpoError::checkpoint(
-                path,
-                "normaliser size differs from obs_dim",
-            ));
-        }
         t.rng = meta
             .rng
             .restore()
@@ -335,6 +264,112 @@ impl<E: Env> Trainer<E> {
             "resumed"
         );
         Ok(t)
+    }
+
+    /// Warm start: copy the policy, value and normaliser of another job's checkpoint
+    /// (`path` is a checkpoint directory or a directory of checkpoints, whose latest is
+    /// used) into this trainer. Optimiser state, RNG and progress stay this trainer's own.
+    /// Network shapes and dimensions must match. Returns the checkpoint used.
+    pub fn warm_start(&mut self, path: &Path) -> Result<PathBuf> {
+        let ckpt = if path.join(checkpoint::STATE_FILE).is_file() {
+            path.to_path_buf()
+        } else {
+            checkpoint::latest_checkpoint(path)?
+                .ok_or_else(|| PpoError::checkpoint(path, "no checkpoint found"))?
+        };
+        let (meta, tensors) = checkpoint::load(&ckpt)?;
+        self.apply_weights(&ckpt, &meta, &tensors)?;
+        tracing::info!(checkpoint = %ckpt.display(), "warm start");
+        Ok(ckpt)
+    }
+
+    /// Check that a checkpoint fits this trainer and copy its networks and normaliser.
+    fn apply_weights(
+        &mut self,
+        path: &Path,
+        meta: &CheckpointMeta,
+        tensors: &HashMap<String, Tensor>,
+    ) -> Result<()> {
+        let mismatch = |what: &str, saved: String, now: String| {
+            PpoError::checkpoint(
+                path,
+                format!("{what} is {saved} in the checkpoint but {now} now"),
+            )
+        };
+        if (meta.obs_dim, meta.act_dim) != (self.obs_dim, self.act_dim) {
+            return Err(mismatch(
+                "(obs_dim, act_dim)",
+                format!("{:?}", (meta.obs_dim, meta.act_dim)),
+                format!("{:?}", (self.obs_dim, self.act_dim)),
+            ));
+        }
+        let (a, b) = (&meta.config, &self.config);
+        if a.policy.hidden != b.policy.hidden || a.value.hidden != b.value.hidden {
+            return Err(mismatch(
+                "hidden sizes (policy, value)",
+                format!("{:?}", (&a.policy.hidden, &a.value.hidden)),
+                format!("{:?}", (&b.policy.hidden, &b.value.hidden)),
+            ));
+        }
+        if a.policy.learn_log_std != b.policy.learn_log_std {
+            return Err(mismatch(
+                "policy.learn_log_std",
+                a.policy.learn_log_std.to_string(),
+                b.policy.learn_log_std.to_string(),
+            ));
+        }
+        // Check every tensor before changing anything.
+        let vars: Vec<(String, Var)> = self
+            .policy
+            .vars()
+            .into_iter()
+            .chain(self.value.vars())
+            .collect();
+        let mut sources = Vec::with_capacity(vars.len());
+        for (name, var) in &vars {
+            let src = tensors
+                .get(name)
+                .ok_or_else(|| PpoError::checkpoint(path, format!("tensor `{name}` missing")))?;
+            if src.dims() != var.dims() || src.dtype() != DType::F32 {
+                return Err(PpoError::checkpoint(
+                    path,
+                    format!(
+                        "tensor `{name}` is {:?} {:?}, expected F32 {:?}",
+                        src.dtype(),
+                        src.dims(),
+                        var.dims()
+                    ),
+                ));
+            }
+            sources.push(src);
+        }
+        let get64 = |name: &str| -> Result<Vec<f64>> {
+            let v = tensors
+                .get(name)
+                .ok_or_else(|| PpoError::checkpoint(path, format!("tensor `{name}` missing")))?;
+            Ok(v.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
+        };
+        let count = *get64("norm.count")?
+            .first()
+            .ok_or_else(|| PpoError::checkpoint(path, "tensor `norm.count` is empty"))?;
+        let norm = RunningNorm::from_parts(
+            count,
+            get64("norm.mean")?,
+            get64("norm.m2")?,
+            self.config.obs_clip,
+        )
+        .map_err(|e| PpoError::checkpoint(path, e.to_string()))?;
+        if norm.dim() != self.obs_dim {
+            return Err(PpoError::checkpoint(
+                path,
+                "normaliser size differs from obs_dim",
+            ));
+        }
+        for ((_, var), src) in vars.iter().zip(sources) {
+            var.set(src)?;
+        }
+        self.norm = norm;
+        Ok(())
     }
 
     /// Write a checkpoint into `dir`, keeping the `keep` most recent. Returns its path.

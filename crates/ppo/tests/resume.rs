@@ -125,3 +125,19 @@ fn resume_rejects_a_different_network() {
     assert!(Trainer::<PointMass>::resume(config(1), envs(), &dir.join("nothing")).is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn warm_start_copies_networks_but_not_progress() {
+    let dir = std::env::temp_dir().join(format!("ppo-warm-start-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut source = Trainer::new(config(1), envs(), 21).unwrap();
+    train(&mut source, 2);
+    source.save_checkpoint(&dir, 1).unwrap();
+    let mut fresh = Trainer::new(config(1), envs(), 22).unwrap();
+    assert_ne!(parameters(&fresh).unwrap(), parameters(&source).unwrap());
+    fresh.warm_start(&dir).unwrap();
+    assert_same(&parameters(&fresh).unwrap(), &parameters(&source).unwrap());
+    assert_eq!(fresh.normalizer(), source.normalizer());
+    assert_eq!(fresh.progress().iterations, 0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
