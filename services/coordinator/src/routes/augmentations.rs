@@ -1,0 +1,436 @@
+//! `/v1/augmentations`: start one over a dataset (one job per clip), follow it
+//! (status, server-sent events), download its results, cancel it.
+
+use std::convert::Infallible;
+use std::io::Write;
+use std::time::Duration;
+
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::{Path, Query, State};
+use axum::http::{StatusCode, header};
+use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use chrono::{DateTime, Utc};
+use futures_util::Stream;
+use motionaug_protocol::{SynthesizeInput, SynthesizeOutput, kinds};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use tokio::sync::broadcast::error::RecvError;
+use uuid::Uuid;
+
+use crate::auth::Tenant;
+use crate::error::ApiError;
+use crate::events::Event;
+use crate::queue;
+use crate::routes::datasets;
+use crate::startup::AppState;
+
+#[derive(Debug, Default, Serialize, Clone, PartialEq)]
+pub struct JobCounts {
+    pub total: i64,
+    pub queued: i64,
+    pub running: i64,
+    pub succeeded: i64,
+    pub failed: i64,
+    pub cancelled: i64,
+}
+
+#[derive(Debug, Serialize, Clone, PartialEq)]
+pub struct JobError {
+    pub job: Uuid,
+    pub clip: Option<String>,
+    pub error: String,
+}
+
+#[derive(Debug, Serialize, Clone, PartialEq)]
+pub struct AugmentationStatus {
+    pub id: Uuid,
+    pub dataset_id: Uuid,
+    /// queued | running | succeeded | failed | cancelled
+    pub status: &'static str,
+    pub progress: f64,
+    pub jobs: JobCounts,
+    pub errors: Vec<JobError>,
+    pub created_at: DateTime<Utc>,
+}
+
+impl AugmentationStatus {
+    pub fn is_terminal(&self) -> bool {
+        matches!(self.status, "succeeded" | "failed" | "cancelled")
+    }
+}
+
+#[derive(Debug, Deserialize)]
+pub struct CreateQuery {
+    /// Seed of the whole augmentation (same meaning as the CLI's `--seed`).
+    pub seed: Option<u64>,
+}
+
+/// The JSON recipe, checked with the same parser the CLI uses.
+fn check_recipe(body: &Bytes) -> Result<(Value, synth::Recipe), ApiError> {
+    let value: Value = serde_json::from_slice(body).map_err(|e| {
+        ApiError::unprocessable(format!(
+            "recipe: not valid JSON at line {}, column {}: {e}",
+            e.line(),
+            e.column()
+        ))
+        .with_file("recipe")
+        .with_line(Some(e.line()))
+    })?;
+    let recipe = motionaug_protocol::recipe::parse(&value).map_err(|e| {
+        let mut err = ApiError::unprocessable(format!("recipe: {}", e.message)).with_file("recipe");
+        if let Some(field) = e.field {
+            err = err.with_field(field);
+        }
+        err
+    })?;
+    Ok((value, recipe))
+}
+
+pub async fn create(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(dataset_id): Path<Uuid>,
+    Query(query): Query<CreateQuery>,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    datasets::find(&state, &tenant, dataset_id).await?;
+    let (recipe, parsed) = check_recipe(&body)?;
+    let seed = parsed.effective_seed(query.seed);
+    let clips: Vec<(Uuid, String, String, String, Option<String>)> = sqlx::query_as(
+        "SELECT id, name, format, source_name, skeleton_name FROM clips
+         WHERE dataset_id = $1 ORDER BY position",
+    )
+    .bind(dataset_id)
+    .fetch_all(&state.db)
+    .await?;
+    let id = Uuid::new_v4();
+    let mut tx = state.db.begin().await?;
+    sqlx::query(
+        "INSERT INTO augmentations (id, tenant_id, dataset_id, recipe, seed) VALUES ($1, $2, $3, $4, $5)",
+    )
+    .bind(id)
+    .bind(tenant.id)
+    .bind(dataset_id)
+    .bind(sqlx::types::Json(&recipe))
+    .bind(seed as i64)
+    .execute(&mut *tx)
+    .await?;
+    for (clip_id, clip_name, format, source_name, skeleton_name) in clips {
+        let input = SynthesizeInput {
+            clip_id,
+            clip_name,
+            source_name,
+            skeleton_name,
+            format: if format == "amc" {
+                motionaug_protocol::ClipFormat::Amc
+            } else {
+                motionaug_protocol::ClipFormat::Bvh
+            },
+            recipe: recipe.clone(),
+            seed,
+        };
+        let input = serde_json::to_value(&input).map_err(|e| ApiError::internal(e.to_string()))?;
+        sqlx::query(
+            "INSERT INTO jobs (id, augmentation_id, kind, state, input, max_attempts)
+             VALUES ($1, $2, $3, 'queued', $4, $5)",
+        )
+        .bind(Uuid::new_v4())
+        .bind(id)
+        .bind(kinds::SYNTHESIZE)
+        .bind(sqlx::types::Json(input))
+        .bind(state.config.queue.max_attempts)
+        .execute(&mut *tx)
+        .await?;
+    }
+    tx.commit().await?;
+    tracing::info!(tenant = %tenant.name, augmentation = %id, dataset = %dataset_id, "augmentation queued");
+    state
+        .events
+        .publish(Event::Wake {
+            kind: kinds::SYNTHESIZE.into(),
+        })
+        .await;
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, format!("/v1/augmentations/{id}"))],
+        Json(json!({ "id": id, "status": "queued" })),
+    )
+        .into_response())
+}
+
+/// Reads the status; `None` when it does not exist or belongs to another tenant.
+pub async fn load_status(
+    state: &AppState,
+    tenant_id: Uuid,
+    id: Uuid,
+) -> Result<Option<AugmentationStatus>, ApiError> {
+    let row: Option<(Uuid, Option<DateTime<Utc>>, DateTime<Utc>)> = sqlx::query_as(
+        "SELECT dataset_id, cancelled_at, created_at FROM augmentations WHERE id = $1 AND tenant_id = $2",
+    )
+    .bind(id)
+    .bind(tenant_id)
+    .fetch_optional(&state.db)
+    .await?;
+    let Some((dataset_id, cancelled_at, created_at)) = row else {
+        return Ok(None);
+    };
+    let (total, queued, running, succeeded, failed, cancelled, done): (
+        i64,
+        i64,
+        i64,
+        i64,
+        i64,
+        i64,
+        f64,
+    ) = sqlx::query_as(
+        "SELECT count(*),
+                count(*) FILTER (WHERE state = 'queued'),
+                count(*) FILTER (WHERE state = 'running'),
+                count(*) FILTER (WHERE state = 'succeeded'),
+                count(*) FILTER (WHERE state = 'failed'),
+                count(*) FILTER (WHERE state = 'cancelled'),
+                COALESCE(sum(CASE WHEN state = 'succeeded' THEN 1 ELSE progress END), 0)::float8
+         FROM jobs WHERE augmentation_id = $1",
+    )
+    .bind(id)
+    .fetch_one(&state.db)
+    .await?;
+    let errors: Vec<(Uuid, Option<String>, String)> = sqlx::query_as(
+        "SELECT id, input->>'clip_name', error FROM jobs
+         WHERE augmentation_id = $1 AND state = 'failed' AND error IS NOT NULL ORDER BY seq",
+    )
+    .bind(id)
+    .fetch_all(&state.db)
+    .await?;
+    let status = if cancelled_at.is_some() {
+        "cancelled"
+    } else if succeeded == total {
+        "succeeded"
+    } else if queued + running == 0 {
+        "failed"
+    } else if running > 0 || succeeded > 0 || failed > 0 {
+        "running"
+    } else {
+        "queued"
+    };
+    Ok(Some(AugmentationStatus {
+        id,
+        dataset_id,
+        status,
+        progress: if total == 0 {
+            1.0
+        } else {
+            (done / total as f64).clamp(0.0, 1.0)
+        },
+        jobs: JobCounts {
+            total,
+            queued,
+            running,
+            succeeded,
+            failed,
+            cancelled,
+        },
+        errors: errors
+            .into_iter()
+            .map(|(job, clip, error)| JobError { job, clip, error })
+            .collect(),
+        created_at,
+    }))
+}
+
+pub async fn get(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(id): Path<Uuid>,
+) -> Result<Json<AugmentationStatus>, ApiError> {
+    load_status(&state, tenant.id, id)
+        .await?
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found("augmentation"))
+}
+
+pub async fn list(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(dataset_id): Path<Uuid>,
+) -> Result<Json<Value>, ApiError> {
+    datasets::find(&state, &tenant, dataset_id).await?;
+    let ids: Vec<Uuid> = sqlx::query_scalar(
+        "SELECT id FROM augmentations WHERE dataset_id = $1 ORDER BY created_at, id",
+    )
+    .bind(dataset_id)
+    .fetch_all(&state.db)
+    .await?;
+    let mut out = Vec::with_capacity(ids.len());
+    for id in ids {
+        if let Some(status) = load_status(&state, tenant.id, id).await? {
+            out.push(status);
+        }
+    }
+    Ok(Json(json!({ "augmentations": out })))
+}
+
+pub async fn cancel(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(id): Path<Uuid>,
+) -> Result<Response, ApiError> {
+    load_status(&state, tenant.id, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("augmentation"))?;
+    let changed = queue::cancel_augmentation(&state.db, id).await?;
+    tracing::info!(augmentation = %id, jobs = changed, "augmentation cancelled");
+    state.events.publish(Event::Augmentation { id }).await;
+    Ok((
+        StatusCode::ACCEPTED,
+        Json(json!({ "id": id, "status": "cancelled" })),
+    )
+        .into_response())
+}
+
+struct Follow {
+    state: AppState,
+    tenant_id: Uuid,
+    id: Uuid,
+    events: tokio::sync::broadcast::Receiver<Event>,
+    last: Option<AugmentationStatus>,
+    done: bool,
+}
+
+/// Server-sent events: a `status` event (same body as `GET /v1/augmentations/{id}`)
+/// now and after every change, until the augmentation ends. Woken by Redis events,
+/// with a database poll as the fallback.
+pub async fn events(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(id): Path<Uuid>,
+) -> Result<Sse<impl Stream<Item = Result<SseEvent, Infallible>>>, ApiError> {
+    load_status(&state, tenant.id, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("augmentation"))?;
+    let follow = Follow {
+        events: state.events.subscribe(),
+        state,
+        tenant_id: tenant.id,
+        id,
+        last: None,
+        done: false,
+    };
+    let stream = futures_util::stream::unfold(follow, |mut f| async move {
+        loop {
+            if f.done {
+                return None;
+            }
+            match load_status(&f.state, f.tenant_id, f.id).await {
+                Ok(Some(status)) if f.last.as_ref() != Some(&status) => {
+                    f.done = status.is_terminal();
+                    let event = SseEvent::default()
+                        .event("status")
+                        .json_data(&status)
+                        .unwrap_or_else(|_| SseEvent::default().comment("encoding failed"));
+                    f.last = Some(status);
+                    return Some((Ok(event), f));
+                }
+                Ok(Some(_)) => {}
+                Ok(None) => {
+                    f.done = true;
+                    return Some((Ok(SseEvent::default().event("deleted").data("{}")), f));
+                }
+                Err(_) => {}
+            }
+            wait_for_change(&mut f.events, f.id, f.state.config.queue.poll_interval).await;
+        }
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::new().interval(Duration::from_secs(15))))
+}
+
+/// Returns after an event about this augmentation or after `poll`.
+async fn wait_for_change(
+    events: &mut tokio::sync::broadcast::Receiver<Event>,
+    id: Uuid,
+    poll: Duration,
+) {
+    let wait = async {
+        loop {
+            match events.recv().await {
+                Ok(Event::Augmentation { id: changed }) if changed == id => return,
+                Ok(_) => {}
+                Err(RecvError::Lagged(_)) => return,
+                Err(RecvError::Closed) => std::future::pending::<()>().await,
+            }
+        }
+    };
+    let _ = tokio::time::timeout(poll, wait).await;
+}
+
+/// A zip of every output with `manifest.json` (the same manifest the CLI writes).
+pub async fn results(
+    State(state): State<AppState>,
+    tenant: Tenant,
+    Path(id): Path<Uuid>,
+) -> Result<Response, ApiError> {
+    let status = load_status(&state, tenant.id, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("augmentation"))?;
+    if status.status != "succeeded" {
+        return Err(ApiError::conflict(format!(
+            "the augmentation is {}; results can be downloaded once it has succeeded",
+            status.status
+        )));
+    }
+    let outputs: Vec<(sqlx::types::Json<Value>,)> = sqlx::query_as(
+        "SELECT j.output FROM jobs j JOIN clips c ON c.id = (j.input->>'clip_id')::uuid
+         WHERE j.augmentation_id = $1 ORDER BY c.position, j.seq",
+    )
+    .bind(id)
+    .fetch_all(&state.db)
+    .await?;
+    let mut entries = Vec::new();
+    let mut files = Vec::new();
+    for (output,) in outputs {
+        let output: SynthesizeOutput = serde_json::from_value(output.0)
+            .map_err(|e| ApiError::internal(format!("stored job output is unreadable: {e}")))?;
+        entries.extend(output.manifest);
+        files.extend(output.files);
+    }
+    let manifest = motionaug_protocol::recipe::manifest_json(entries)
+        .map_err(|e| ApiError::internal(format!("cannot write the manifest: {e}")))?;
+    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    let zip_err =
+        |e: &dyn std::fmt::Display| ApiError::internal(format!("cannot build the zip: {e}"));
+    for name in files {
+        let content: Option<Vec<u8>> = sqlx::query_scalar(
+            "SELECT content FROM artifacts WHERE augmentation_id = $1 AND name = $2",
+        )
+        .bind(id)
+        .bind(&name)
+        .fetch_optional(&state.db)
+        .await?;
+        let content = content.ok_or_else(|| {
+            ApiError::internal(format!("result file `{name}` is missing from the store"))
+        })?;
+        zip.start_file(name.as_str(), options)
+            .map_err(|e| zip_err(&e))?;
+        zip.write_all(&content).map_err(|e| zip_err(&e))?;
+    }
+    zip.start_file("manifest.json", options)
+        .map_err(|e| zip_err(&e))?;
+    zip.write_all(manifest.as_bytes())
+        .map_err(|e| zip_err(&e))?;
+    let bytes = zip.finish().map_err(|e| zip_err(&e))?.into_inner();
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/zip".to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"augmentation-{id}.zip\""),
+            ),
+        ],
+        bytes,
+    )
+        .into_response())
+}

@@ -1,0 +1,282 @@
+//! Turning the files of an upload into validated clips.
+//!
+//! Zips are unpacked (with limits on entry count and unpacked size), every file is
+//! parsed with the motion crate's readers, AMC motions are paired with an ASF of
+//! the same upload, and every clip is checked against the frame limit. The first
+//! problem rejects the whole upload with an error naming the file and line, so a
+//! dataset is stored complete or not at all.
+
+use std::io::Read;
+
+use motionaug_protocol::ClipFormat;
+use motionaug_protocol::clip::{self, LoadedSkeleton};
+
+use crate::configuration::Limits;
+use crate::error::ApiError;
+
+/// One uploaded file (or zip entry).
+#[derive(Debug, Clone)]
+pub struct UploadFile {
+    /// Name for messages: `data.zip/HDM_bd.asf` for a zip entry.
+    pub label: String,
+    /// Base file name, e.g. `HDM_bd.asf`.
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+/// A clip ready to be stored.
+#[derive(Debug, Clone)]
+pub struct ParsedClip {
+    pub name: String,
+    pub format: ClipFormat,
+    pub source_name: String,
+    pub source: Vec<u8>,
+    pub skeleton_name: Option<String>,
+    pub skeleton: Option<Vec<u8>>,
+    pub frames: usize,
+    pub fps: f64,
+    pub joints: usize,
+    pub joint_names: Vec<String>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Bvh,
+    Asf,
+    Amc,
+    Zip,
+}
+
+fn base_name(path: &str) -> &str {
+    path.rsplit(['/', '\\']).next().unwrap_or(path)
+}
+
+fn stem(name: &str) -> &str {
+    name.rsplit_once('.').map_or(name, |(s, _)| s)
+}
+
+fn kind_of(file: &UploadFile) -> Result<Kind, ApiError> {
+    let ext = file
+        .name
+        .rsplit_once('.')
+        .map(|(_, e)| e.to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("bvh") => Ok(Kind::Bvh),
+        Some("asf") => Ok(Kind::Asf),
+        Some("amc") => Ok(Kind::Amc),
+        Some("zip") => Ok(Kind::Zip),
+        _ => Err(ApiError::unprocessable(format!(
+            "{}: unsupported file type; upload .bvh, .asf, .amc or a .zip of them",
+            file.label
+        ))
+        .with_file(&file.label)),
+    }
+}
+
+/// Files a zip may hold that are not mocap (ignored instead of rejected).
+fn is_ignorable_entry(path: &str) -> bool {
+    let base = base_name(path);
+    path.starts_with("__MACOSX/")
+        || base.starts_with('.')
+        || base.eq_ignore_ascii_case("readme.md")
+        || base.eq_ignore_ascii_case("readme.txt")
+}
+
+/// Replaces every zip by its entries, enforcing the file-count and unpacked-size limits.
+pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<UploadFile>, ApiError> {
+    let mut out = Vec::new();
+    let mut unpacked: u64 = 0;
+    let too_many = || {
+        ApiError::too_large(format!(
+            "too many files: at most {} per upload (zip entries count)",
+            limits.max_files
+        ))
+    };
+    for file in files {
+        if kind_of(&file)? != Kind::Zip {
+            out.push(file);
+            if out.len() > limits.max_files {
+                return Err(too_many());
+            }
+            continue;
+        }
+        let bad_zip = |e: zip::result::ZipError| {
+            ApiError::unprocessable(format!("{}: not a readable zip archive: {e}", file.label))
+                .with_file(&file.label)
+        };
+        let mut archive =
+            zip::ZipArchive::new(std::io::Cursor::new(&file.bytes)).map_err(bad_zip)?;
+        for i in 0..archive.len() {
+            let mut entry = archive.by_index(i).map_err(bad_zip)?;
+            if entry.is_dir() {
+                continue;
+            }
+            let path = entry.name().map_err(bad_zip)?.to_string();
+            if is_ignorable_entry(&path) {
+                continue;
+            }
+            let label = format!("{}/{}", file.label, path);
+            let remaining = limits.max_unzipped_bytes.saturating_sub(unpacked);
+            let mut bytes = Vec::new();
+            (&mut entry)
+                .take(remaining + 1)
+                .read_to_end(&mut bytes)
+                .map_err(|e| {
+                    ApiError::unprocessable(format!("{label}: cannot unpack: {e}"))
+                        .with_file(&label)
+                })?;
+            unpacked += bytes.len() as u64;
+            if unpacked > limits.max_unzipped_bytes {
+                return Err(ApiError::too_large(format!(
+                    "{label}: the zip unpacks to more than {} bytes",
+                    limits.max_unzipped_bytes
+                ))
+                .with_file(&label));
+            }
+            let entry_file = UploadFile {
+                name: base_name(&path).to_string(),
+                label,
+                bytes,
+            };
+            if kind_of(&entry_file)? == Kind::Zip {
+                return Err(ApiError::unprocessable(format!(
+                    "{}: zips inside zips are not supported",
+                    entry_file.label
+                ))
+                .with_file(&entry_file.label));
+            }
+            out.push(entry_file);
+            if out.len() > limits.max_files {
+                return Err(too_many());
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn parse_failed(label: &str, e: motion::MotionError) -> ApiError {
+    let (line, message) = match &e {
+        motion::MotionError::Parse(p) => (p.line, e.to_string()),
+        _ => (None, format!("{label}: {e}")),
+    };
+    ApiError::unprocessable(message)
+        .with_file(label)
+        .with_line(line)
+}
+
+/// The ASF an AMC pairs with: the only one, or the one whose name is the longest
+/// prefix of the AMC's name (`HDM_bd.asf` for `HDM_bd_kick_001.amc`).
+fn pick_skeleton<'a>(
+    amc: &UploadFile,
+    skeletons: &'a [(UploadFile, LoadedSkeleton)],
+) -> Result<&'a (UploadFile, LoadedSkeleton), ApiError> {
+    if skeletons.len() == 1 {
+        return Ok(&skeletons[0]);
+    }
+    let amc_stem = stem(&amc.name).to_ascii_lowercase();
+    let best = skeletons
+        .iter()
+        .filter(|(f, _)| amc_stem.starts_with(&stem(&f.name).to_ascii_lowercase()))
+        .max_by_key(|(f, _)| stem(&f.name).len());
+    best.ok_or_else(|| {
+        let detail = if skeletons.is_empty() {
+            format!("{}: an AMC motion needs its ASF skeleton in the same upload", amc.label)
+        } else {
+            let names: Vec<&str> = skeletons.iter().map(|(f, _)| f.name.as_str()).collect();
+            format!(
+                "{}: cannot tell which skeleton this motion uses; none of {} is a prefix of its name",
+                amc.label,
+                names.join(", ")
+            )
+        };
+        ApiError::unprocessable(detail).with_file(&amc.label)
+    })
+}
+
+/// Parses every file; the first problem rejects the upload.
+pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<ParsedClip>, ApiError> {
+    let files = expand_zips(files, limits)?;
+    let mut skeletons = Vec::new();
+    let mut motions = Vec::new();
+    for file in files {
+        match kind_of(&file)? {
+            Kind::Asf => {
+                let skeleton = clip::load_skeleton(&file.label, &file.bytes)
+                    .map_err(|e| parse_failed(&file.label, e))?;
+                skeletons.push((file, skeleton));
+            }
+            Kind::Bvh | Kind::Amc => motions.push(file),
+            Kind::Zip => unreachable!("zips were expanded"),
+        }
+    }
+    if motions.is_empty() {
+        return Err(ApiError::unprocessable(
+            "the upload holds no motion: add at least one .bvh or .amc file",
+        ));
+    }
+    let mut clips: Vec<ParsedClip> = Vec::with_capacity(motions.len());
+    for file in motions {
+        let (format, motion, skeleton_file) = if kind_of(&file)? == Kind::Bvh {
+            let motion = clip::load_bvh(&file.label, &file.bytes)
+                .map_err(|e| parse_failed(&file.label, e))?;
+            (ClipFormat::Bvh, motion, None)
+        } else {
+            let (asf, skeleton) = pick_skeleton(&file, &skeletons)?;
+            let motion = clip::load_amc(&file.label, &file.bytes, skeleton)
+                .map_err(|e| parse_failed(&file.label, e))?;
+            (ClipFormat::Amc, motion, Some(asf))
+        };
+        if motion.frames() > limits.max_frames {
+            return Err(ApiError::too_large(format!(
+                "{}: {} frames; clips may have at most {} frames",
+                file.label,
+                motion.frames(),
+                limits.max_frames
+            ))
+            .with_file(&file.label));
+        }
+        let name = stem(&file.name).to_string();
+        if let Some(other) = clips.iter().find(|c| c.name == name) {
+            return Err(ApiError::unprocessable(format!(
+                "{}: a clip named `{name}` was already uploaded as {}; clip names must be unique",
+                file.label, other.source_name
+            ))
+            .with_file(&file.label));
+        }
+        let skeleton = motion.skeleton();
+        clips.push(ParsedClip {
+            name,
+            format,
+            frames: motion.frames(),
+            fps: motion.fps(),
+            joints: skeleton.len(),
+            joint_names: skeleton.joints().iter().map(|j| j.name.clone()).collect(),
+            source_name: file.name.clone(),
+            source: file.bytes,
+            skeleton_name: skeleton_file.map(|f| f.name.clone()),
+            skeleton: skeleton_file.map(|f| f.bytes.clone()),
+        });
+    }
+    Ok(clips)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_and_kinds() {
+        assert_eq!(base_name("a/b/HDM_bd.asf"), "HDM_bd.asf");
+        assert_eq!(stem("HDM_bd_kick.amc"), "HDM_bd_kick");
+        assert!(is_ignorable_entry("__MACOSX/x.bvh"));
+        assert!(is_ignorable_entry("dir/.DS_Store"));
+        assert!(!is_ignorable_entry("dir/walk.bvh"));
+        let f = |n: &str| UploadFile {
+            label: n.into(),
+            name: n.into(),
+            bytes: vec![],
+        };
+        assert_eq!(kind_of(&f("A.BVH")).unwrap(), Kind::Bvh);
+        assert!(kind_of(&f("notes.txt")).is_err());
+    }
+}

@@ -1,0 +1,1081 @@
+//! API tests against the real application, a real Postgres (a fresh database per
+//! test, dropped afterwards) and the machine's Redis.
+//!
+//! Jobs are driven through the internal worker API by the test itself, which lets
+//! it check the lease rules precisely (stale epochs, duplicate completions,
+//! cancellation, retries). Real worker processes are exercised by the worker
+//! crate's end-to-end test.
+
+use std::collections::HashMap;
+use std::io::{Read, Write};
+use std::time::Duration;
+
+use motionaug_coordinator::configuration::Config;
+use motionaug_coordinator::startup::Application;
+use reqwest::StatusCode;
+use reqwest::multipart::{Form, Part};
+use serde_json::{Value, json};
+use sqlx::{Connection, PgConnection, PgPool};
+use uuid::Uuid;
+
+const ADMIN_URL: &str = "postgres://postgres@127.0.0.1:5432/test";
+const WORKER_TOKEN: &str = "test-worker-token-0123456789";
+
+struct TestApp {
+    base: String,
+    db: PgPool,
+    db_name: String,
+    http: reqwest::Client,
+    key: String,
+    server: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
+    let db_name = format!("test_{}", Uuid::new_v4().simple());
+    let mut admin = PgConnection::connect(ADMIN_URL)
+        .await
+        .expect("postgres at 127.0.0.1:5432");
+    sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {db_name}")))
+        .execute(&mut admin)
+        .await
+        .unwrap();
+    let database_url = format!("postgres://postgres@127.0.0.1:5432/{db_name}");
+    let mut env: HashMap<String, String> = [
+        ("DATABASE_URL", database_url.as_str()),
+        ("REDIS_URL", "redis://127.0.0.1:6379/0"),
+        ("MOTIONAUG_REDIS_PREFIX", db_name.as_str()),
+        ("MOTIONAUG_LISTEN", "127.0.0.1:0"),
+        ("MOTIONAUG_WORKER_TOKEN", WORKER_TOKEN),
+        ("MOTIONAUG_MAX_UPLOAD_BYTES", "1048576"),
+        ("MOTIONAUG_MAX_FILES", "5"),
+        ("MOTIONAUG_MAX_FRAMES", "500"),
+        ("MOTIONAUG_LEASE_MS", "2000"),
+        ("MOTIONAUG_RETRY_BASE_MS", "10"),
+        ("MOTIONAUG_REAP_INTERVAL_MS", "50"),
+        ("MOTIONAUG_POLL_INTERVAL_MS", "50"),
+        ("MOTIONAUG_MAX_ATTEMPTS", "3"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect();
+    for (k, v) in overrides {
+        env.insert(k.to_string(), v.to_string());
+    }
+    let config = Config::from_lookup(|k| env.get(k).cloned()).unwrap();
+    let app = Application::build(config).await.unwrap();
+    let port = app.port();
+    let db = app.state().db.clone();
+    let server = tokio::spawn(app.run_until_stopped(std::future::pending()));
+    let key = motionaug_coordinator::auth::create_key(&db, "alpha")
+        .await
+        .unwrap();
+    TestApp {
+        base: format!("http://127.0.0.1:{port}"),
+        db,
+        db_name,
+        http: reqwest::Client::new(),
+        key,
+        server,
+    }
+}
+
+impl TestApp {
+    fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    fn get(&self, path: &str) -> reqwest::RequestBuilder {
+        self.http.get(self.url(path)).bearer_auth(&self.key)
+    }
+
+    fn worker(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
+        self.http
+            .request(method, self.url(&format!("/internal/v1{path}")))
+            .bearer_auth(WORKER_TOKEN)
+    }
+
+    async fn upload(&self, key: &str, files: &[(&str, Vec<u8>)]) -> reqwest::Response {
+        let mut form = Form::new().text("name", "test set");
+        for (name, bytes) in files {
+            form = form.part(
+                "file",
+                Part::bytes(bytes.clone()).file_name(name.to_string()),
+            );
+        }
+        self.http
+            .post(self.url("/v1/datasets"))
+            .bearer_auth(key)
+            .multipart(form)
+            .send()
+            .await
+            .unwrap()
+    }
+
+    async fn dataset_count(&self) -> i64 {
+        sqlx::query_scalar("SELECT count(*) FROM datasets")
+            .fetch_one(&self.db)
+            .await
+            .unwrap()
+    }
+
+    async fn augment(&self, dataset: &str, recipe: &Value) -> reqwest::Response {
+        self.http
+            .post(self.url(&format!("/v1/datasets/{dataset}/augmentations")))
+            .bearer_auth(&self.key)
+            .json(recipe)
+            .send()
+            .await
+            .unwrap()
+    }
+
+    async fn claim(&self) -> Option<Value> {
+        let r = self
+            .worker(reqwest::Method::POST, "/jobs/claim")
+            .json(&json!({"worker_id": "test-worker", "kinds": ["synthesize"], "wait_ms": 0}))
+            .send()
+            .await
+            .unwrap();
+        match r.status() {
+            StatusCode::NO_CONTENT => None,
+            StatusCode::OK => Some(r.json().await.unwrap()),
+            s => panic!("claim answered {s}"),
+        }
+    }
+
+    async fn report(&self, job: &Value, what: &str, body: Value) -> StatusCode {
+        self.worker(
+            reqwest::Method::POST,
+            &format!("/jobs/{}/{what}", job["id"].as_str().unwrap()),
+        )
+        .json(&body)
+        .send()
+        .await
+        .unwrap()
+        .status()
+    }
+
+    async fn status(&self, aug: &str) -> Value {
+        self.get(&format!("/v1/augmentations/{aug}"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap()
+    }
+
+    async fn cleanup(self) {
+        self.server.abort();
+        let _ = self.server.await;
+        self.db.close().await;
+        let mut admin = PgConnection::connect(ADMIN_URL).await.unwrap();
+        sqlx::query(sqlx::AssertSqlSafe(format!(
+            "DROP DATABASE IF EXISTS {} WITH (FORCE)",
+            self.db_name
+        )))
+        .execute(&mut admin)
+        .await
+        .unwrap();
+    }
+}
+
+/// A small valid BVH: a root with 6 channels, two 3-channel joints, an end site.
+fn bvh(frames: usize) -> Vec<u8> {
+    let mut s = String::from(
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+         JOINT Spine\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n\
+         JOINT Head\n    {\n      OFFSET 0 10 0\n      CHANNELS 3 Zrotation Xrotation Yrotation\n\
+         End Site\n      {\n        OFFSET 0 5 0\n      }\n    }\n  }\n}\nMOTION\n",
+    );
+    s.push_str(&format!("Frames: {frames}\nFrame Time: 0.033333\n"));
+    for f in 0..frames {
+        let a = f as f64;
+        s.push_str(&format!(
+            "{:.3} 90 0 {:.3} 0 0 {:.3} 0 0 0 {:.3} 0\n",
+            a * 0.5,
+            a.sin() * 5.0,
+            a.cos() * 10.0,
+            a * 0.1
+        ));
+    }
+    s.into_bytes()
+}
+
+fn zip_of(files: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    for (name, bytes) in files {
+        zip.start_file(*name, zip::write::SimpleFileOptions::default())
+            .unwrap();
+        zip.write_all(bytes).unwrap();
+    }
+    zip.finish().unwrap().into_inner()
+}
+
+/// A manifest entry as the synth crate writes it.
+fn entry(file: &str, source: &str) -> Value {
+    json!({"file": file, "source": source, "op": "noise", "op_index": 0, "copy": 0, "seed": 1,
+           "params": {}, "frames": 40, "fps": 30.0})
+}
+
+fn empty_output() -> Value {
+    json!({"manifest": [], "files": []})
+}
+
+fn noise_recipe() -> Value {
+    json!({"seed": 3, "ops": [{"op": "noise", "copies": 2}]})
+}
+
+async fn problem(r: reqwest::Response) -> (StatusCode, Value) {
+    let status = r.status();
+    let ctype = r
+        .headers()
+        .get("content-type")
+        .map(|v| v.to_str().unwrap().to_string())
+        .unwrap_or_default();
+    assert_eq!(ctype, "application/problem+json", "status {status}");
+    (status, r.json().await.unwrap())
+}
+
+async fn upload_one(app: &TestApp) -> (String, Value) {
+    let r = app.upload(&app.key, &[("walk.bvh", bvh(40))]).await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    (body["id"].as_str().unwrap().to_string(), body)
+}
+
+#[tokio::test]
+async fn operational_endpoints_work_without_a_key() {
+    let app = spawn_app(&[]).await;
+    let r = app.http.get(app.url("/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+    let ready: Value = app
+        .http
+        .get(app.url("/readyz"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(ready["database"], "ok");
+    assert_eq!(ready["redis"], "ok");
+    let metrics = app
+        .http
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    for name in [
+        "motionaug_jobs{state=\"queued\"}",
+        "motionaug_workers_active",
+        "motionaug_job_duration_seconds",
+        "motionaug_job_failures",
+    ] {
+        assert!(metrics.contains(name), "metrics lack {name}:\n{metrics}");
+    }
+    let openapi: Value = app
+        .http
+        .get(app.url("/openapi.json"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    for path in [
+        "/v1/datasets",
+        "/v1/datasets/{id}",
+        "/v1/datasets/{id}/augmentations",
+        "/v1/augmentations/{id}",
+        "/v1/augmentations/{id}/events",
+        "/v1/augmentations/{id}/results",
+    ] {
+        assert!(openapi["paths"].get(path).is_some(), "{path} undocumented");
+    }
+    let page = app
+        .http
+        .get(app.url("/docs"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(page.contains("/openapi.json") && !page.contains("https://"));
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn requests_without_a_valid_key_are_refused() {
+    let app = spawn_app(&[]).await;
+    let r = app.http.get(app.url("/v1/datasets")).send().await.unwrap();
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert!(body["detail"].as_str().unwrap().contains("Bearer"));
+    let r = app
+        .http
+        .get(app.url("/v1/datasets"))
+        .bearer_auth("mak_nope")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    // The worker API does not accept tenant keys, nor tenants the worker token.
+    let r = app
+        .http
+        .post(app.url("/internal/v1/jobs/claim"))
+        .bearer_auth(&app.key)
+        .json(&json!({"worker_id": "w", "kinds": ["synthesize"]}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    let r = app
+        .http
+        .get(app.url("/v1/datasets"))
+        .bearer_auth(WORKER_TOKEN)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn upload_list_show_delete() {
+    let app = spawn_app(&[]).await;
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("walk.bvh", bvh(40)),
+                ("set.zip", zip_of(&[("dir/jump.bvh", bvh(12))])),
+            ],
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    let clips = body["clips"].as_array().unwrap();
+    assert_eq!(clips.len(), 2);
+    assert_eq!(clips[0]["name"], "walk");
+    assert_eq!(clips[0]["frames"], 40);
+    assert_eq!(clips[0]["joints"], 3);
+    assert!((clips[0]["fps"].as_f64().unwrap() - 30.0).abs() < 0.01);
+    assert_eq!(clips[1]["name"], "jump");
+    assert_eq!(clips[1]["frames"], 12);
+    let id = body["id"].as_str().unwrap();
+
+    let list: Value = app
+        .get("/v1/datasets")
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["datasets"].as_array().unwrap().len(), 1);
+    assert_eq!(list["datasets"][0]["clip_count"], 2);
+    let shown: Value = app
+        .get(&format!("/v1/datasets/{id}"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(shown["clips"], body["clips"]);
+    assert_eq!(shown["name"], "test set");
+
+    let r = app
+        .http
+        .delete(app.url(&format!("/v1/datasets/{id}")))
+        .bearer_auth(&app.key)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::NO_CONTENT);
+    let r = app.get(&format!("/v1/datasets/{id}")).send().await.unwrap();
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    assert_eq!(app.dataset_count().await, 0);
+    let clips: i64 = sqlx::query_scalar("SELECT count(*) FROM clips")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(clips, 0);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn bad_files_reject_the_whole_upload_and_name_the_problem() {
+    let app = spawn_app(&[]).await;
+    // A broken frame line in the second file: nothing is stored.
+    let mut broken = bvh(10);
+    let text = String::from_utf8(broken.clone())
+        .unwrap()
+        .replace("Frame Time: 0.033333\n0.000", "Frame Time: 0.033333\nabc");
+    broken = text.into_bytes();
+    let r = app
+        .upload(&app.key, &[("good.bvh", bvh(10)), ("bad.bvh", broken)])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "bad.bvh");
+    assert!(body["line"].as_u64().is_some(), "{body}");
+    assert!(body["detail"].as_str().unwrap().contains("bad.bvh"));
+    assert_eq!(app.dataset_count().await, 0);
+
+    let r = app
+        .upload(&app.key, &[("notes.txt", b"hello".to_vec())])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(body["detail"].as_str().unwrap().contains("notes.txt"));
+
+    let r = app
+        .upload(&app.key, &[("a.bvh", bvh(5)), ("x/a.bvh", bvh(5))])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        body["detail"].as_str().unwrap().contains("unique"),
+        "{body}"
+    );
+
+    let r = app
+        .upload(
+            &app.key,
+            &[(
+                "motion.amc",
+                b":FULLY-SPECIFIED\n1\nroot 0 0 0 0 0 0\n".to_vec(),
+            )],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "motion.amc");
+
+    let r = app
+        .upload(&app.key, &[("junk.zip", b"PK not a zip".to_vec())])
+        .await;
+    assert_eq!(problem(r).await.0, StatusCode::UNPROCESSABLE_ENTITY);
+
+    let r = app
+        .http
+        .post(app.url("/v1/datasets"))
+        .bearer_auth(&app.key)
+        .multipart(Form::new().text("name", "empty"))
+        .send()
+        .await
+        .unwrap();
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["field"], "file");
+    assert_eq!(app.dataset_count().await, 0);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn limits_on_body_size_file_count_and_frames() {
+    let app = spawn_app(&[]).await;
+    // Body limit is 1 MiB in these tests.
+    let big = vec![b' '; 2 << 20];
+    let r = app.upload(&app.key, &[("big.bvh", big)]).await;
+    assert_eq!(problem(r).await.0, StatusCode::PAYLOAD_TOO_LARGE);
+    // At most 5 files, zip entries included.
+    let entries: Vec<(String, Vec<u8>)> = (0..6).map(|i| (format!("c{i}.bvh"), bvh(3))).collect();
+    let refs: Vec<(&str, Vec<u8>)> = entries
+        .iter()
+        .map(|(n, b)| (n.as_str(), b.clone()))
+        .collect();
+    let r = app.upload(&app.key, &[("many.zip", zip_of(&refs))]).await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+    assert!(body["detail"].as_str().unwrap().contains("at most 5"));
+    // At most 500 frames per clip.
+    let r = app.upload(&app.key, &[("long.bvh", bvh(501))]).await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+    assert_eq!(body["file"], "long.bvh");
+    // Recipes are JSON bodies with their own limit.
+    let (dataset, _) = upload_one(&app).await;
+    let huge = json!({"ops": [{"op": "noise", "pad": "x".repeat(5 << 20)}]});
+    let r = app.augment(&dataset, &huge).await;
+    assert_eq!(r.status(), StatusCode::PAYLOAD_TOO_LARGE);
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn tenants_never_see_each_other() {
+    let app = spawn_app(&[]).await;
+    let other = motionaug_coordinator::auth::create_key(&app.db, "beta")
+        .await
+        .unwrap();
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let aug = aug["id"].as_str().unwrap();
+    let as_other =
+        |m: reqwest::Method, p: String| app.http.request(m, app.url(&p)).bearer_auth(&other);
+    let list: Value = as_other(reqwest::Method::GET, "/v1/datasets".into())
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["datasets"].as_array().unwrap().len(), 0);
+    for (method, path) in [
+        (reqwest::Method::GET, format!("/v1/datasets/{dataset}")),
+        (reqwest::Method::DELETE, format!("/v1/datasets/{dataset}")),
+        (
+            reqwest::Method::GET,
+            format!("/v1/datasets/{dataset}/augmentations"),
+        ),
+        (reqwest::Method::GET, format!("/v1/augmentations/{aug}")),
+        (
+            reqwest::Method::GET,
+            format!("/v1/augmentations/{aug}/events"),
+        ),
+        (
+            reqwest::Method::GET,
+            format!("/v1/augmentations/{aug}/results"),
+        ),
+        (reqwest::Method::DELETE, format!("/v1/augmentations/{aug}")),
+    ] {
+        let r = as_other(method.clone(), path.clone()).send().await.unwrap();
+        assert_eq!(r.status(), StatusCode::NOT_FOUND, "{method} {path}");
+    }
+    let r = as_other(
+        reqwest::Method::POST,
+        format!("/v1/datasets/{dataset}/augmentations"),
+    )
+    .json(&noise_recipe())
+    .send()
+    .await
+    .unwrap();
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    // Still there and untouched for its owner.
+    assert_eq!(app.status(aug).await["status"], "queued");
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn bad_recipes_name_the_field() {
+    let app = spawn_app(&[]).await;
+    let (dataset, _) = upload_one(&app).await;
+    let r = app
+        .augment(&dataset, &json!({"ops": [{"op": "noise", "copies": 0}]}))
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(body["field"].as_str().unwrap().contains("ops[0]"), "{body}");
+    assert!(
+        body["detail"].as_str().unwrap().contains("copies"),
+        "{body}"
+    );
+    let r = app
+        .augment(&dataset, &json!({"ops": [{"op": "explode"}]}))
+        .await;
+    let (_, body) = problem(r).await;
+    assert!(body["detail"].as_str().unwrap().contains("explode"));
+    let r = app
+        .http
+        .post(app.url(&format!("/v1/datasets/{dataset}/augmentations")))
+        .bearer_auth(&app.key)
+        .body("{\"ops\": [")
+        .send()
+        .await
+        .unwrap();
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["line"], 1);
+    let jobs: i64 = sqlx::query_scalar("SELECT count(*) FROM jobs")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(jobs, 0);
+    app.cleanup().await;
+}
+
+/// The whole flow through the worker API: claim, heartbeat, artifacts,
+/// checkpoint, completion; stale and duplicate reports; results zip.
+#[tokio::test]
+async fn augment_poll_and_download_through_the_worker_api() {
+    let app = spawn_app(&[]).await;
+    let r = app
+        .upload(&app.key, &[("walk.bvh", bvh(30)), ("jump.bvh", bvh(20))])
+        .await;
+    let dataset: Value = r.json().await.unwrap();
+    let dataset = dataset["id"].as_str().unwrap();
+    let r = app.augment(dataset, &noise_recipe()).await;
+    assert_eq!(r.status(), StatusCode::ACCEPTED);
+    let aug: Value = r.json().await.unwrap();
+    assert_eq!(aug["status"], "queued");
+    let aug = aug["id"].as_str().unwrap();
+    let status = app.status(aug).await;
+    assert_eq!(status["jobs"]["total"], 2);
+    assert_eq!(status["jobs"]["queued"], 2);
+    assert_eq!(status["progress"], 0.0);
+    let r = app
+        .get(&format!("/v1/augmentations/{aug}/results"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(problem(r).await.0, StatusCode::CONFLICT);
+
+    for expected_clip in ["walk", "jump"] {
+        let job = app.claim().await.expect("a job");
+        let id = job["id"].as_str().unwrap();
+        let epoch = job["epoch"].as_i64().unwrap();
+        assert_eq!(job["input"]["clip_name"], expected_clip);
+        assert_eq!(job["input"]["seed"], 3);
+        assert_eq!(job["has_checkpoint"], false);
+        // The worker can read the clip it was given.
+        let clip_id = job["input"]["clip_id"].as_str().unwrap();
+        let source = app
+            .worker(reqwest::Method::GET, &format!("/clips/{clip_id}/source"))
+            .send()
+            .await
+            .unwrap()
+            .bytes()
+            .await
+            .unwrap();
+        assert!(source.starts_with(b"HIERARCHY"));
+        assert_eq!(
+            app.report(&job, "heartbeat", json!({"epoch": epoch, "progress": 0.5}))
+                .await,
+            StatusCode::OK
+        );
+        let s = app.status(aug).await;
+        assert_eq!(s["status"], "running");
+        assert!(s["progress"].as_f64().unwrap() > 0.0);
+        let file = format!("{expected_clip}_out.bvh");
+        let r = app
+            .worker(
+                reqwest::Method::PUT,
+                &format!("/jobs/{id}/artifacts/{file}?epoch={epoch}"),
+            )
+            .body(format!("content of {expected_clip}"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::NO_CONTENT);
+        let r = app
+            .worker(
+                reqwest::Method::PUT,
+                &format!("/jobs/{id}/checkpoint?epoch={epoch}"),
+            )
+            .body("cp")
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::NO_CONTENT);
+        // A wrong epoch is refused everywhere.
+        let stale = epoch - 1;
+        assert_eq!(
+            app.report(&job, "heartbeat", json!({"epoch": stale, "progress": 0.1}))
+                .await,
+            StatusCode::CONFLICT
+        );
+        let r = app
+            .worker(
+                reqwest::Method::PUT,
+                &format!("/jobs/{id}/artifacts/x.bvh?epoch={stale}"),
+            )
+            .body("old")
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::CONFLICT);
+        // An output naming a file that was never uploaded is refused.
+        let bad = json!({"manifest": [], "files": ["never.bvh"]});
+        assert_eq!(
+            app.report(&job, "complete", json!({"epoch": epoch, "output": bad}))
+                .await,
+            StatusCode::UNPROCESSABLE_ENTITY
+        );
+        let bad = json!({"manifest": [{"file": "x"}], "files": []});
+        assert_eq!(
+            app.report(&job, "complete", json!({"epoch": epoch, "output": bad}))
+                .await,
+            StatusCode::UNPROCESSABLE_ENTITY
+        );
+        let output =
+            json!({"manifest": [entry(&file, &format!("{expected_clip}.bvh"))], "files": [file]});
+        assert_eq!(
+            app.report(&job, "complete", json!({"epoch": stale, "output": output}))
+                .await,
+            StatusCode::CONFLICT
+        );
+        assert_eq!(
+            app.report(&job, "complete", json!({"epoch": epoch, "output": output}))
+                .await,
+            StatusCode::NO_CONTENT
+        );
+        // A duplicate of the accepted report changes nothing and is not an error.
+        assert_eq!(
+            app.report(
+                &job,
+                "complete",
+                json!({"epoch": epoch, "output": empty_output()})
+            )
+            .await,
+            StatusCode::NO_CONTENT
+        );
+        // Reports after completion are refused.
+        let r = app
+            .worker(
+                reqwest::Method::PUT,
+                &format!("/jobs/{id}/artifacts/late.bvh?epoch={epoch}"),
+            )
+            .body("late")
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::CONFLICT);
+    }
+    assert!(app.claim().await.is_none());
+    let status = app.status(aug).await;
+    assert_eq!(status["status"], "succeeded");
+    assert_eq!(status["progress"], 1.0);
+    assert_eq!(status["jobs"]["succeeded"], 2);
+    let completions: Vec<i32> = sqlx::query_scalar("SELECT completions FROM jobs")
+        .fetch_all(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(completions, vec![1, 1]);
+
+    let r = app
+        .get(&format!("/v1/augmentations/{aug}/results"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()["content-type"], "application/zip");
+    let bytes = r.bytes().await.unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes.to_vec())).unwrap();
+    let mut names: Vec<String> = zip.file_names().map(|n| n.unwrap().to_string()).collect();
+    names.sort();
+    assert_eq!(names, vec!["jump_out.bvh", "manifest.json", "walk_out.bvh"]);
+    let mut manifest = String::new();
+    zip.by_name("manifest.json")
+        .unwrap()
+        .read_to_string(&mut manifest)
+        .unwrap();
+    let manifest: Value = serde_json::from_str(&manifest).unwrap();
+    // Sorted by source as the CLI does.
+    assert_eq!(manifest[0]["file"], "jump_out.bvh");
+    assert_eq!(manifest[1]["file"], "walk_out.bvh");
+    let mut content = String::new();
+    zip.by_name("walk_out.bvh")
+        .unwrap()
+        .read_to_string(&mut content)
+        .unwrap();
+    assert_eq!(content, "content of walk");
+
+    let metrics = app
+        .http
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        metrics.contains("motionaug_jobs{state=\"succeeded\"} 2"),
+        "{metrics}"
+    );
+    assert!(metrics.contains("motionaug_workers_active 1"), "{metrics}");
+    assert!(
+        metrics.contains("motionaug_job_duration_seconds_count{kind=\"synthesize\"} 2"),
+        "{metrics}"
+    );
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn expired_leases_are_reclaimed_and_old_leases_cannot_report() {
+    let app = spawn_app(&[("MOTIONAUG_LEASE_MS", "300")]).await;
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let aug = aug["id"].as_str().unwrap();
+    let first = app.claim().await.unwrap();
+    let epoch1 = first["epoch"].as_i64().unwrap();
+    let id = first["id"].as_str().unwrap();
+    let r = app
+        .worker(
+            reqwest::Method::PUT,
+            &format!("/jobs/{id}/checkpoint?epoch={epoch1}"),
+        )
+        .body("step 3")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::NO_CONTENT);
+    // The first worker goes silent; the lease expires and the job is claimable again.
+    let mut second = None;
+    for _ in 0..100 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        if let Some(job) = app.claim().await {
+            second = Some(job);
+            break;
+        }
+    }
+    let second = second.expect("job reclaimed after lease expiry");
+    assert_eq!(second["id"], first["id"]);
+    assert_eq!(second["attempt"], 2);
+    assert_eq!(second["has_checkpoint"], true);
+    let epoch2 = second["epoch"].as_i64().unwrap();
+    assert!(epoch2 > epoch1);
+    let checkpoint = app
+        .worker(
+            reqwest::Method::GET,
+            &format!("/jobs/{id}/checkpoint?epoch={epoch2}"),
+        )
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(checkpoint, "step 3");
+    // The old worker wakes up: everything it says is refused.
+    let output = empty_output();
+    assert_eq!(
+        app.report(
+            &first,
+            "heartbeat",
+            json!({"epoch": epoch1, "progress": 0.9})
+        )
+        .await,
+        StatusCode::CONFLICT
+    );
+    assert_eq!(
+        app.report(
+            &first,
+            "complete",
+            json!({"epoch": epoch1, "output": output})
+        )
+        .await,
+        StatusCode::CONFLICT
+    );
+    assert_eq!(
+        app.report(
+            &second,
+            "complete",
+            json!({"epoch": epoch2, "output": output})
+        )
+        .await,
+        StatusCode::NO_CONTENT
+    );
+    let (state, completions, attempts): (String, i32, i32) =
+        sqlx::query_as("SELECT state, completions, attempts FROM jobs WHERE id = $1::uuid")
+            .bind(id)
+            .fetch_one(&app.db)
+            .await
+            .unwrap();
+    assert_eq!((state.as_str(), completions, attempts), ("succeeded", 1, 2));
+    assert_eq!(app.status(aug).await["status"], "succeeded");
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn failures_are_retried_then_kept() {
+    let app = spawn_app(&[]).await;
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let aug = aug["id"].as_str().unwrap();
+    // Max attempts is 3: two retryable failures go back to the queue, the third is final.
+    for attempt in 1..=3 {
+        let mut job = None;
+        for _ in 0..100 {
+            if let Some(j) = app.claim().await {
+                job = Some(j);
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let job = job.expect("job to retry");
+        assert_eq!(job["attempt"], attempt);
+        let epoch = job["epoch"].as_i64().unwrap();
+        let body = json!({"epoch": epoch, "error": format!("boom {attempt}"), "retryable": true});
+        assert_eq!(app.report(&job, "fail", body).await, StatusCode::NO_CONTENT);
+    }
+    let status = app.status(aug).await;
+    assert_eq!(status["status"], "failed");
+    assert_eq!(status["jobs"]["failed"], 1);
+    assert_eq!(status["errors"][0]["error"], "boom 3");
+    assert_eq!(status["errors"][0]["clip"], "walk");
+    assert!(app.claim().await.is_none());
+    // A permanent failure is not retried.
+    let aug2: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let job = app.claim().await.unwrap();
+    let epoch = job["epoch"].as_i64().unwrap();
+    let body = json!({"epoch": epoch, "error": "bad input", "retryable": false});
+    assert_eq!(app.report(&job, "fail", body).await, StatusCode::NO_CONTENT);
+    assert_eq!(
+        app.status(aug2["id"].as_str().unwrap()).await["status"],
+        "failed"
+    );
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn cancellation_reaches_running_jobs_and_events_stream() {
+    let app = spawn_app(&[]).await;
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let aug = aug["id"].as_str().unwrap().to_string();
+
+    // Follow the augmentation's events while a worker runs and it is cancelled.
+    let events = app
+        .get(&format!("/v1/augmentations/{aug}/events"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(events.status(), StatusCode::OK);
+    assert!(
+        events.headers()["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("text/event-stream")
+    );
+    let reader = tokio::spawn(async move {
+        let mut text = String::new();
+        let mut stream = events;
+        while let Ok(Some(chunk)) = stream.chunk().await {
+            text.push_str(&String::from_utf8_lossy(&chunk));
+        }
+        text
+    });
+
+    let job = app.claim().await.unwrap();
+    let epoch = job["epoch"].as_i64().unwrap();
+    let reply: Value = app
+        .worker(
+            reqwest::Method::POST,
+            &format!("/jobs/{}/heartbeat", job["id"].as_str().unwrap()),
+        )
+        .json(&json!({"epoch": epoch, "progress": 0.25}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(reply["cancelled"], false);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let r = app
+        .http
+        .delete(app.url(&format!("/v1/augmentations/{aug}")))
+        .bearer_auth(&app.key)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::ACCEPTED);
+    let reply: Value = app
+        .worker(
+            reqwest::Method::POST,
+            &format!("/jobs/{}/heartbeat", job["id"].as_str().unwrap()),
+        )
+        .json(&json!({"epoch": epoch, "progress": 0.5}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(reply["cancelled"], true);
+    let output = empty_output();
+    assert_eq!(
+        app.report(&job, "complete", json!({"epoch": epoch, "output": output}))
+            .await,
+        StatusCode::GONE
+    );
+    assert_eq!(app.status(&aug).await["status"], "cancelled");
+
+    let text = tokio::time::timeout(Duration::from_secs(10), reader)
+        .await
+        .expect("stream ends")
+        .unwrap();
+    let statuses: Vec<Value> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .map(|d| serde_json::from_str(d).unwrap())
+        .collect();
+    let names: Vec<&str> = statuses
+        .iter()
+        .map(|s| s["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(names.first(), Some(&"queued"), "{text}");
+    assert!(names.contains(&"running"), "{text}");
+    assert_eq!(names.last(), Some(&"cancelled"), "{text}");
+    assert!(text.contains("event: status"));
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn works_without_redis() {
+    // Nothing listens on port 1: events stay in-process and listeners poll.
+    let app = spawn_app(&[("REDIS_URL", "redis://127.0.0.1:1/0")]).await;
+    let ready: Value = app
+        .http
+        .get(app.url("/readyz"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(ready["redis"], "unreachable");
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let job = app.claim().await.unwrap();
+    let output = empty_output();
+    let epoch = job["epoch"].as_i64().unwrap();
+    assert_eq!(
+        app.report(&job, "complete", json!({"epoch": epoch, "output": output}))
+            .await,
+        StatusCode::NO_CONTENT
+    );
+    assert_eq!(
+        app.status(aug["id"].as_str().unwrap()).await["status"],
+        "succeeded"
+    );
+    app.cleanup().await;
+}

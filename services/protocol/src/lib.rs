@@ -1,0 +1,144 @@
+//! What the coordinator and the workers must agree on.
+//!
+//! * The wire types of the internal worker API (`/internal/v1/...`), here in the
+//!   crate root: keeping request and response bodies in one small crate makes the
+//!   contract explicit and keeps the worker free of any database or HTTP-server
+//!   dependency.
+//! * [`clip`]: how a stored clip (BVH, or AMC with its ASF) becomes a `Motion`,
+//!   so that an upload accepted by the coordinator is read identically by workers.
+//! * [`recipe`]: reading a recipe and writing `manifest.json`, the same way the CLI does.
+
+pub mod clip;
+pub mod recipe;
+
+use serde::{Deserialize, Serialize};
+use uuid::Uuid;
+
+/// Path prefix of the worker API on the coordinator.
+pub const WORKER_API_PREFIX: &str = "/internal/v1";
+
+/// Job kinds the coordinator schedules and workers run.
+pub mod kinds {
+    /// Kinematic synthesis of one clip with the augmentation's recipe.
+    pub const SYNTHESIZE: &str = "synthesize";
+    /// Every kind, for metrics and documentation.
+    pub const ALL: &[&str] = &[SYNTHESIZE];
+}
+
+/// `POST /internal/v1/jobs/claim`: ask for one runnable job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ClaimRequest {
+    /// Stable id of the worker process (shown in job listings and logs).
+    pub worker_id: String,
+    /// Job kinds this worker can run.
+    pub kinds: Vec<String>,
+    /// How long the coordinator may hold the request open waiting for work
+    /// (long poll). The coordinator caps it.
+    #[serde(default)]
+    pub wait_ms: u64,
+}
+
+/// Answer to a claim: the job and the lease the worker now holds on it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ClaimedJob {
+    pub id: Uuid,
+    /// Lease token. Every claim of a job gets a new, larger epoch; every report
+    /// about the job must carry it, and reports with an older epoch are rejected.
+    pub epoch: i64,
+    pub kind: String,
+    /// 1 for the first run, 2 for the first retry, ...
+    pub attempt: i32,
+    /// Kind-specific input (for `synthesize`: [`SynthesizeInput`]).
+    pub input: serde_json::Value,
+    /// The lease expires this long after the last heartbeat.
+    pub lease_ms: u64,
+    /// How often the worker should heartbeat.
+    pub heartbeat_ms: u64,
+    /// Whether a previous attempt stored a checkpoint (fetch it with
+    /// `GET /internal/v1/jobs/{id}/checkpoint?epoch=N`).
+    pub has_checkpoint: bool,
+}
+
+/// `POST /internal/v1/jobs/{id}/heartbeat`: extend the lease, report progress.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct HeartbeatRequest {
+    pub epoch: i64,
+    /// Fraction done, 0..=1.
+    pub progress: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct HeartbeatReply {
+    /// The job was cancelled: stop working on it and report nothing more.
+    pub cancelled: bool,
+}
+
+/// `POST /internal/v1/jobs/{id}/complete`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CompleteRequest {
+    pub epoch: i64,
+    /// Kind-specific output (for `synthesize`: [`SynthesizeOutput`]).
+    pub output: serde_json::Value,
+}
+
+/// `POST /internal/v1/jobs/{id}/fail`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FailRequest {
+    pub epoch: i64,
+    /// What went wrong, for the user (kept on the job).
+    pub error: String,
+    /// `false` when running the job again cannot help (bad input).
+    pub retryable: bool,
+}
+
+/// `POST /internal/v1/jobs/{id}/release`: give a job back without using up an
+/// attempt (graceful worker shutdown). Its checkpoint is kept.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ReleaseRequest {
+    pub epoch: i64,
+}
+
+/// Source format of an uploaded clip.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClipFormat {
+    /// A BVH file (skeleton and motion in one).
+    Bvh,
+    /// An AMC motion with the ASF skeleton it was uploaded with.
+    Amc,
+}
+
+/// Input of a `synthesize` job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SynthesizeInput {
+    pub clip_id: Uuid,
+    /// Clip name inside its dataset (file stem); outputs are named after it.
+    pub clip_name: String,
+    /// The uploaded file name (used in error messages and the manifest).
+    pub source_name: String,
+    /// File name of the ASF skeleton for AMC clips.
+    pub skeleton_name: Option<String>,
+    pub format: ClipFormat,
+    /// The augmentation's recipe, as accepted by `POST /v1/datasets/{id}/augmentations`.
+    pub recipe: serde_json::Value,
+    /// Seed for this clip's outputs.
+    pub seed: u64,
+}
+
+/// Output of a `synthesize` job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SynthesizeOutput {
+    /// Manifest entries of the outputs, in order, as the CLI writes them.
+    pub manifest: Vec<serde_json::Value>,
+    /// Names of the artifacts the job uploaded.
+    pub files: Vec<String>,
+}
+
+/// Checkpoint of a `synthesize` job: outputs `0..done` are uploaded, with their
+/// manifest entries and file names, so a resumed attempt continues at `done`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct SynthesizeCheckpoint {
+    pub done: usize,
+    pub manifest: Vec<serde_json::Value>,
+    pub files: Vec<String>,
+}
