@@ -68,6 +68,7 @@ fn main() {
         if let Ok(v) = std::env::var("PHYSICS_BENCH_STAB") {
             cfg.sim.stabilization_iterations = v.parse().unwrap_or(1);
         }
+        cfg.residual_every_substep = std::env::var("PHYSICS_BENCH_RESIDUAL_EVERY_STEP").is_ok();
         cfg.sim.pd = match std::env::var("PHYSICS_BENCH_PD").as_deref() {
             Ok("stable") => physics::sim::PdMode::StableTorque,
             Ok("explicit") => physics::sim::PdMode::Explicit,

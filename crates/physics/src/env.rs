@@ -78,6 +78,9 @@ pub struct Config {
     pub character: CharacterOptions,
     /// A non-foot body may touch the ground when the reference body is this close to it (m).
     pub contact_tolerance: f32,
+    /// Recompute the PD-residual force at every physics step instead of once
+    /// per control step (the reference computes it once per policy step).
+    pub residual_every_substep: bool,
 }
 
 impl Default for Config {
@@ -90,6 +93,7 @@ impl Default for Config {
             learned_scale: 100.0,
             character: CharacterOptions::default(),
             contact_tolerance: 0.1,
+            residual_every_substep: false,
         }
     }
 }
@@ -113,7 +117,7 @@ impl Config {
 /// Extra figures of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepInfo {
-    /// |F| of the root residual force applied this step (N).
+    /// Mean |F| of the root residual force applied over this step (N).
     pub residual_force: f32,
     /// |tau| of the root residual torque (N m).
     pub residual_torque: f32,
@@ -363,14 +367,7 @@ impl ImitationEnv {
         let root = self.sim.state[0];
         let (force, torque) = match self.config.residual {
             Residual::None => (Vec3::ZERO, Vec3::ZERO),
-            Residual::Pd => {
-                let r = &self.reference.frames[k].bodies[0];
-                let [kp, kd, kpr, kdr] = self.config.residual_gains;
-                (
-                    kp * (r.pos - root.pos) + kd * (r.vel - root.vel),
-                    kpr * axis_angle(r.rot * root.rot.inverse()) + kdr * (r.angvel - root.angvel),
-                )
-            }
+            Residual::Pd => self.pd_residual(&self.reference.frames[k].bodies[0], &root),
             Residual::Learned => {
                 let o = 3 * (n - 1);
                 let h = heading_of(root.rot, self.spec.forward, self.heading0);
@@ -383,6 +380,8 @@ impl ImitationEnv {
             }
         };
 
+        let (mut force, mut torque) = (force, torque);
+        let (mut sum_f, mut sum_t) = (0.0f32, 0.0f32);
         let mut fell = false;
         let inv = 1.0 / self.substeps as f32;
         for sub in 0..self.substeps {
@@ -401,6 +400,23 @@ impl ImitationEnv {
                 self.targets[b] = t;
                 self.target_vel[b] = f0.rel_vel[b].lerp(f1.rel_vel[b], alpha);
             }
+            if sub > 0 && self.config.residual == Residual::Pd && self.config.residual_every_substep
+            {
+                let (f0, f1) = (
+                    &self.reference.frames[k].bodies[0],
+                    &self.reference.frames[k + 1].bodies[0],
+                );
+                let r = BodyState {
+                    pos: f0.pos.lerp(f1.pos, alpha),
+                    rot: f0.rot.slerp(f1.rot, alpha),
+                    vel: f0.vel.lerp(f1.vel, alpha),
+                    angvel: f0.angvel.lerp(f1.angvel, alpha),
+                };
+                let root = self.sim.state[0];
+                (force, torque) = self.pd_residual(&r, &root);
+            }
+            sum_f += force.length();
+            sum_t += torque.length();
             self.sim
                 .substep(&self.targets, &self.target_vel, force, torque);
             if !fell {
@@ -415,7 +431,10 @@ impl ImitationEnv {
         let r_imit = self.imitation_reward();
         let r_res = match self.config.residual {
             Residual::None => 1.0,
-            _ => (-0.01 * (force.length_squared() + torque.length_squared()).sqrt()).exp(),
+            _ => {
+                let (f, t) = (sum_f * inv, sum_t * inv);
+                (-0.01 * (f * f + t * t).sqrt()).exp()
+            }
         };
         let (reward, r_imit) = if fell {
             (0.0, 0.0)
@@ -427,12 +446,21 @@ impl ImitationEnv {
             r_imit,
             done: fell || self.frame + 1 >= self.reference.len(),
             info: StepInfo {
-                residual_force: force.length(),
-                residual_torque: torque.length(),
+                residual_force: sum_f * inv,
+                residual_torque: sum_t * inv,
                 fell,
                 frame: self.frame,
             },
         })
+    }
+
+    /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.
+    fn pd_residual(&self, r: &BodyState, root: &BodyState) -> (Vec3, Vec3) {
+        let [kp, kd, kpr, kdr] = self.config.residual_gains;
+        (
+            kp * (r.pos - root.pos) + kd * (r.vel - root.vel),
+            kpr * axis_angle(r.rot * root.rot.inverse()) + kdr * (r.angvel - root.angvel),
+        )
     }
 
     fn fallen(&self, k: usize) -> bool {

@@ -26,8 +26,9 @@
 //!
 //! Measured (release, one thread, `cargo bench -p physics --bench physics`):
 //! on the HDM05 kick, 47-58 simulated seconds per wall second at the default
-//! 1/120 s step with 4 solver substeps, mean joint error 0.075 rad with action 0
-//! and the PD-residual force, no fall. See [`sim`] for the table of step sizes.
+//! 1/120 s step with 4 solver substeps while other builds loaded the machine
+//! (127 on a quiet moment), mean joint error 0.075 rad with action 0 and the
+//! PD-residual force, no fall. See [`sim`] for the table of step sizes.
 
 pub mod bench;
 pub mod character;

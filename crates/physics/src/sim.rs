@@ -29,38 +29,38 @@
 //!
 //! HDM05 `HDM_bd_kickLFront1Reps_001` (1.34 s), action 0 with the PD residual,
 //! control at 30 Hz, `cargo bench -p physics --bench physics` (release, one
-//! thread, on the shared 2-core machine while other builds ran, so +-30 %).
-//! Rapier's `num_solver_iterations` are substeps (the step is divided by them).
-//! "falls" = the pass ended with a non-foot body on the ground.
+//! thread). Rapier's `num_solver_iterations` are substeps (the step is divided
+//! by them). "falls" = passes that ended with a non-foot body on the ground
+//! (the bench then restarts at the next frame). One run, all rows under the
+//! same heavy load (load average ~10 on the 2 cores from other builds): read
+//! the speeds relative to each other. On a quiet moment the default row ran at
+//! 127 sim s / wall s (65 us per step).
 //!
-//! | PD mode | armature kg m^2 | dt : iters | sim s / wall s | us / step | joint error rad | falls |
+//! | PD mode | armature kg m^2 | dt : iters | sim s / wall s | us / step | joint error rad | falls / passes |
 //! |---|---|---|---|---|---|---|
-//! | StableTorque | 0 | 1/240 : 4 | 28.4 | 147 | 1.41 | every pass |
-//! | Motor | 0 | 1/1200 : 4 | 4.1 | 205 | 0.045 | 0 |
-//! | Motor | 0 | 1/600 : 4 | 9.4 | 177 | 0.070 | every pass |
-//! | Motor | 0 | 1/600 : 8 | 6.4 | 260 | 0.045 | 0 |
-//! | Motor | 0 | 1/300 : 12 | 7.6 | 440 | 0.052 | 0 |
-//! | Motor | 0 | 1/240 : 4 | 22.0 | 190 | 0.116 | every pass |
-//! | Motor | 0 | 1/240 : 16 | 6.0 | 694 | 0.050 | 0 |
-//! | Motor | 0.02 | 1/240 : 4 | 25.2 | 165 | 0.067 | 0 |
-//! | Motor | 0.02 | 1/120 : 4 | 51.8 | 161 | 0.095 | every pass |
-//! | Motor | 0.05 | 1/240 : 3 | 33.6 | 124 | 0.059 | 0 |
-//! | Motor | 0.05 | 1/180 : 3 | 46.3 | 120 | 0.071 | 0 |
-//! | **Motor** | **0.05** | **1/120 : 4** | **49.1** | **170** | **0.075** | **0** |
-//! | Motor | 0.1 | 1/120 : 4 | 58.5 | 142 | 0.061 | 0 |
-//! | Motor | 0.05 | 1/90 : 5 | 65.3 | 170 | 0.082 | 0 |
-//! | Motor | 0.05 | 1/60 : 6 | 89.1 | 187 | 0.099 | 0 |
-//! | Motor | 0.05 | 1/60 : 8 | 68.2 | 244 | 0.081 | 0 |
+//! | StableTorque | 0 | 1/240 : 4 | 62.5 | 67 | 1.41 | 200 / 100 |
+//! | Motor | 0 | 1/1200 : 4 | 11.3 | 74 | 0.045 | 0 / 17 |
+//! | Motor | 0 | 1/600 : 4 | 15.4 | 108 | 0.070 | 25 / 25 |
+//! | Motor | 0 | 1/600 : 8 | 6.3 | 263 | 0.045 | 0 / 10 |
+//! | Motor | 0 | 1/300 : 12 | 14.5 | 230 | 0.052 | 0 / 22 |
+//! | Motor | 0 | 1/240 : 4 | 28.3 | 147 | 0.116 | 44 / 44 |
+//! | Motor | 0 | 1/120 : 4 | 38.4 | 217 | 0.122 | 189 / 63 |
+//! | Motor | 0.02 | 1/600 : 4 | 11.0 | 151 | 0.042 | 0 / 17 |
+//! | Motor | 0.02 | 1/240 : 4 | 29.5 | 141 | 0.067 | 0 / 45 |
+//! | Motor | 0.02 | 1/120 : 4 | 44.9 | 186 | 0.095 | 70 / 70 |
+//! | Motor | 0.05 | 1/1200 : 4 | 5.2 | 159 | 0.035 | 0 / 8 |
+//! | Motor | 0.05 | 1/240 : 4 | 29.1 | 143 | 0.051 | 0 / 44 |
+//! | **Motor** | **0.05** | **1/120 : 4** | **52.9** | **157** | **0.075** | **0 / 80** |
+//! | Motor | 0.05 | 1/60 : 8 | 59.7 | 279 | 0.081 | 0 / 90 |
+//! | Motor | 0.1 | 1/120 : 4 | 46.3 | 180 | 0.061 | 0 / 70 |
+//! | Motor, no stabilisation pass | 0.05 | 1/120 : 4 | 56.4 | 148 | 0.095 | 87 / 87 |
 //!
-//! The default row measured 47 to 58 sim s / wall s on different runs (load
-//! from other processes). 1/60 s with 8 substeps is ~30 % faster at a similar
-//! error, but collision detection then runs only every 17 ms; we keep 1/120 s.
-//!
-//! Without the stabilisation pass (`stabilization_iterations = 0`) steps are
-//! ~25 % cheaper but the kick falls. The default is the bold row: the coarsest
-//! step that tracks the kick without a fall at the smallest armature tried.
-//! Most of the time is rapier's joint solver (`JointConstraint::solve`,
-//! `finalize_constraints`: ~50 % in `perf`); our own per-step code is ~3 %.
+//! The default is the bold row: the coarsest step that tracks the kick without
+//! a fall at the smallest armature tried. 1/60 s with 8 substeps is a little
+//! faster at a similar error, but collision detection then runs only every
+//! 17 ms. `Explicit` torques blow up at all of these steps. Most of the time is
+//! rapier's joint solver (`JointConstraint::solve`, `finalize_constraints`:
+//! about half in `perf`); our own per-step code is about 3 %.
 //!
 //! Our code in [`Sim::substep`] and the environment's step allocates nothing;
 //! rapier 0.36 itself makes about 11 small heap allocations per physics step
