@@ -5,9 +5,10 @@
 //! *geometry* (rest pose, root at the origin, y up) and uses names only to tell
 //! left from right:
 //!
-//! 1. **Legs**: the lowest leaf tip below the root is one foot; the other foot is
-//!    the lowest leaf tip whose common ancestor with the first lies above
-//!    mid-thigh (toes of the same foot meet at the foot, far lower).
+//! 1. **Legs**: the lowest leaf tip of the rest pose is one foot; the other
+//!    foot is the lowest leaf tip (in the lowest quarter of the body) whose
+//!    common ancestor with the first lies above the knees, 40 % of the height
+//!    over the floor (toes of the same foot meet at the foot, far lower).
 //!    `P` = their common ancestor.
 //! 2. **Arms**: among the remaining leaves, the one farthest from the root along
 //!    the bones is a hand; the other hand is the farthest leaf whose branch (from
@@ -493,13 +494,19 @@ impl<'a> Builder<'a> {
         let h = self.height;
         let n = self.sk.len();
         let leaves: Vec<usize> = (0..n).filter(|&j| self.is_leaf(j)).collect();
-        let root_y = self.pos[0].y;
+        // Height of the lowest point of the rest pose (the floor under the feet).
+        let floor_y = self
+            .pos
+            .iter()
+            .chain(&self.tip)
+            .map(|p| p.y)
+            .fold(f64::INFINITY, f64::min);
 
         // 1. Legs.
         let low: Vec<usize> = leaves
             .iter()
             .copied()
-            .filter(|&l| self.tip[l].y < root_y - 0.25 * h)
+            .filter(|&l| self.tip[l].y < floor_y + 0.25 * h)
             .collect();
         let by_y = |a: &usize, b: &usize| self.tip[*a].y.total_cmp(&self.tip[*b].y);
         let l1 = low.iter().copied().min_by(by_y).ok_or_else(|| {
@@ -508,7 +515,7 @@ impl<'a> Builder<'a> {
         let l2 = low
             .iter()
             .copied()
-            .filter(|&l| self.pos[self.lca(l1, l)].y > root_y - 0.15 * h)
+            .filter(|&l| self.pos[self.lca(l1, l)].y > floor_y + 0.4 * h)
             .min_by(by_y)
             .ok_or_else(|| bad("found only one leg"))?;
         let p = self.lca(l1, l2);
@@ -857,7 +864,12 @@ impl<'a> Builder<'a> {
                 }
             };
             let (_, kp, kd, tl, w) = reference_model(role);
-            let parent = self.sk.parent(j).map(body_of);
+            // Joints above the pelvis driver are merged into the pelvis: it has no parent body.
+            let parent = if b == 0 {
+                None
+            } else {
+                self.sk.parent(j).map(body_of)
+            };
             let anchor_in_parent = match parent {
                 Some(pb) => v(origin - self.pos[drivers[pb].0]),
                 None => Vec3::ZERO,

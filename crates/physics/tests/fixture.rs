@@ -246,3 +246,60 @@ fn roles_come_from_geometry_when_names_say_nothing() {
             .any(|b| b.driver == left_hip && b.role == Role::UpperLeg(Side::Left))
     );
 }
+
+/// Forward kinematics of the recorded motion puts every driver joint where
+/// the simulated body is, also when the file has a root above the pelvis.
+#[test]
+fn recording_matches_the_simulated_bodies_with_an_extra_root() {
+    let base = cmu_humanoid();
+    let h = physics::fixtures::standing_root_height(&base);
+    let mut joints = vec![motion::Joint {
+        name: "Reference".into(),
+        parent: None,
+        offset: glam::DVec3::ZERO,
+        channels: vec![],
+        end_site: None,
+        limits: None,
+    }];
+    for j in base.joints() {
+        let mut j = j.clone();
+        j.parent = Some(j.parent.map_or(0, |p| p + 1));
+        if j.name == "Hips" {
+            j.offset = glam::DVec3::new(0.0, h, 0.0);
+        }
+        joints.push(j);
+    }
+    let sk = std::sync::Arc::new(motion::Skeleton::new(joints, 1.0).unwrap());
+    let src = sway(base, 1.0, 120.0);
+    let n = sk.len();
+    let mut rots = Vec::new();
+    for f in 0..src.frames() {
+        rots.push(glam::DQuat::from_rotation_y(0.1));
+        rots.extend_from_slice(src.pose(f));
+    }
+    let m = motion::Motion::new(
+        sk.clone(),
+        120.0,
+        vec![glam::DVec3::new(0.3, 0.0, 0.2); src.frames()],
+        rots,
+    )
+    .unwrap();
+    let mut env = ImitationEnv::new(&m, &Config::default()).unwrap();
+    assert_eq!(env.spec().bodies[0].driver, sk.find("Hips").unwrap());
+    let action = vec![0.0; env.act_dim()];
+    for _ in 0..10 {
+        env.step(&action).unwrap();
+    }
+    let rec = env.recorded_motion().unwrap();
+    let world = rec.world_transforms(rec.frames() - 1);
+    let floor = glam::DVec3::Y * env.reference().floor as f64;
+    for (b, body) in env.spec().bodies.iter().enumerate() {
+        let s = env.body_states()[b];
+        let d = (world[body.driver].translation - (s.pos.as_dvec3() + floor)).length();
+        let a = motion::rotation::angle_between(world[body.driver].rotation, s.rot.as_dquat());
+        // Rotations are copied exactly; positions follow from the file's bone
+        // lengths, so they differ by the joints' constraint drift (sub-mm).
+        assert!(d < 5e-3 && a < 1e-4, "{}: {d} m {a} rad", body.name);
+    }
+    assert_eq!(rec.joints(), n);
+}
