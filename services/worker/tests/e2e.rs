@@ -1,1 +1,704 @@
-fn main() {}
+//! End-to-end tests with real processes: a coordinator process, several
+//! `motionaug-worker` processes, a private `redis-server` and a fresh Postgres
+//! database per scenario.
+//!
+//! Each scenario breaks something in the middle of an augmentation (SIGKILL a
+//! worker, SIGTERM a worker, SIGKILL and restart the coordinator, flush and stop
+//! Redis) and then checks that every job completed exactly once and that the
+//! results are byte-identical to what the synth crate produces in this process.
+//!
+//! The test binary has its own `main` (`harness = false`): started with
+//! `MOTIONAUG_E2E_ROLE=coordinator` it *is* the coordinator (the same entry point
+//! as the `motionaug-coordinator` binary), which gives the test a real coordinator
+//! process without depending on another package's binary. Run one scenario with
+//! `cargo test -p motionaug-worker --test e2e -- NAME`.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Read;
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, ensure};
+use reqwest::multipart::{Form, Part};
+use serde_json::{Value, json};
+use sqlx::{Connection, PgConnection, PgPool};
+use uuid::Uuid;
+
+const ADMIN_URL: &str = "postgres://postgres@127.0.0.1:5432/test";
+const TOKEN: &str = "e2e-worker-token-0123456789";
+const LEASE_MS: u64 = 1500;
+
+fn main() {
+    if std::env::var("MOTIONAUG_E2E_ROLE").as_deref() == Ok("coordinator") {
+        if let Err(e) = motionaug_coordinator::cli::main() {
+            eprintln!("coordinator: {e:#}");
+            std::process::exit(1);
+        }
+        return;
+    }
+    let filter = std::env::args().skip(1).find(|a| !a.starts_with('-'));
+    let scenarios: Vec<(&str, fn() -> anyhow::Result<()>)> = vec![
+        (
+            "worker_killed_mid_job",
+            || block_on(worker_killed_mid_job()),
+        ),
+        ("worker_sigterm_hands_job_back", || {
+            block_on(worker_sigterm_hands_job_back())
+        }),
+        ("coordinator_restart", || block_on(coordinator_restart())),
+        ("redis_flushed_and_restarted", || {
+            block_on(redis_flushed_and_restarted())
+        }),
+    ];
+    let started = Instant::now();
+    let (mut passed, mut failed, mut filtered) = (0, 0, 0);
+    for (name, scenario) in scenarios {
+        if filter.as_deref().is_some_and(|f| !name.contains(f)) {
+            filtered += 1;
+            continue;
+        }
+        let t = Instant::now();
+        match scenario() {
+            Ok(()) => {
+                passed += 1;
+                println!("test {name} ... ok ({:.1}s)", t.elapsed().as_secs_f64());
+            }
+            Err(e) => {
+                failed += 1;
+                println!("test {name} ... FAILED\n{e:#}");
+            }
+        }
+    }
+    println!(
+        "\ntest result: {}. {passed} passed; {failed} failed; 0 ignored; 0 measured; {filtered} filtered out; finished in {:.2}s\n",
+        if failed == 0 { "ok" } else { "FAILED" },
+        started.elapsed().as_secs_f64()
+    );
+    if failed > 0 {
+        std::process::exit(1);
+    }
+}
+
+fn block_on(f: impl std::future::Future<Output = anyhow::Result<()>>) -> anyhow::Result<()> {
+    tokio::runtime::Runtime::new()?.block_on(f)
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data")
+}
+
+/// The clips every scenario uploads: two HDM05 AMC clips with their ASF and a CMU BVH.
+const CLIPS: &[&str] = &[
+    "HDM_bd_kickLFront1Reps_001_120.amc",
+    "HDM_bd_jogLeftCircle4StepsRstart_001_120.amc",
+    "16_11_walk_veer_left.bvh",
+];
+
+fn recipe() -> Value {
+    json!({
+        "seed": 11,
+        "ops": [
+            {"op": "noise", "copies": 3},
+            {"op": "time_warp", "copies": 2},
+            {"op": "mirror"},
+            {"op": "mask", "mode": "lower_body"},
+        ]
+    })
+}
+
+/// Kills a child process with SIGKILL (the default of `Child::kill`) and reaps it.
+fn kill(child: &mut Child) {
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+fn sigterm(child: &Child) -> anyhow::Result<()> {
+    let status = Command::new("kill")
+        .arg("-TERM")
+        .arg(child.id().to_string())
+        .status()?;
+    ensure!(status.success(), "kill -TERM failed");
+    Ok(())
+}
+
+/// One scenario's processes and database.
+struct Cluster {
+    dir: PathBuf,
+    db_name: String,
+    db: PgPool,
+    port: u16,
+    redis_port: u16,
+    redis: Option<Child>,
+    coordinator: Option<Child>,
+    coordinator_starts: usize,
+    workers: BTreeMap<String, Child>,
+    http: reqwest::Client,
+    key: String,
+}
+
+impl Cluster {
+    async fn start() -> anyhow::Result<Cluster> {
+        let db_name = format!("test_{}", Uuid::new_v4().simple());
+        let mut admin = PgConnection::connect(ADMIN_URL)
+            .await
+            .context("postgres at 127.0.0.1:5432")?;
+        sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {db_name}")))
+            .execute(&mut admin)
+            .await?;
+        let dir = std::env::temp_dir().join(format!("motionaug-e2e-{db_name}"));
+        std::fs::create_dir_all(&dir)?;
+        let mut cluster = Cluster {
+            db: PgPool::connect_lazy(&format!("postgres://postgres@127.0.0.1:5432/{db_name}"))?,
+            db_name,
+            dir,
+            port: free_port(),
+            redis_port: free_port(),
+            redis: None,
+            coordinator: None,
+            coordinator_starts: 0,
+            workers: BTreeMap::new(),
+            http: reqwest::Client::new(),
+            key: String::new(),
+        };
+        cluster.start_redis().await?;
+        cluster.start_coordinator().await?;
+        cluster.key = cluster.create_key("e2e")?;
+        Ok(cluster)
+    }
+
+    fn database_url(&self) -> String {
+        format!("postgres://postgres@127.0.0.1:5432/{}", self.db_name)
+    }
+
+    fn log(&self, name: &str) -> anyhow::Result<Stdio> {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.join(format!("{name}.log")))?;
+        Ok(Stdio::from(file))
+    }
+
+    /// A private Redis on its own port, so stopping it disturbs nobody else.
+    async fn start_redis(&mut self) -> anyhow::Result<()> {
+        let child = Command::new("redis-server")
+            .args([
+                "--bind",
+                "127.0.0.1",
+                "--port",
+                &self.redis_port.to_string(),
+            ])
+            .args(["--save", "", "--appendonly", "no"])
+            .stdout(self.log("redis")?)
+            .stderr(Stdio::null())
+            .spawn()
+            .context("redis-server must be installed")?;
+        self.redis = Some(child);
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", self.redis_port)).is_err() {
+            ensure!(Instant::now() < deadline, "redis-server did not start");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(())
+    }
+
+    fn stop_redis(&mut self) {
+        if let Some(mut r) = self.redis.take() {
+            kill(&mut r);
+        }
+    }
+
+    fn coordinator_command(&self) -> anyhow::Result<Command> {
+        let mut cmd = Command::new(std::env::current_exe()?);
+        cmd.env("MOTIONAUG_E2E_ROLE", "coordinator")
+            .env("DATABASE_URL", self.database_url())
+            .env(
+                "REDIS_URL",
+                format!("redis://127.0.0.1:{}/0", self.redis_port),
+            )
+            .env("MOTIONAUG_LISTEN", format!("127.0.0.1:{}", self.port))
+            .env("MOTIONAUG_WORKER_TOKEN", TOKEN)
+            .env("MOTIONAUG_LEASE_MS", LEASE_MS.to_string())
+            .env("MOTIONAUG_REAP_INTERVAL_MS", "100")
+            .env("MOTIONAUG_POLL_INTERVAL_MS", "200")
+            .env("MOTIONAUG_RETRY_BASE_MS", "50")
+            .env("RUST_LOG", "info");
+        Ok(cmd)
+    }
+
+    async fn start_coordinator(&mut self) -> anyhow::Result<()> {
+        self.coordinator_starts += 1;
+        let name = format!("coordinator-{}", self.coordinator_starts);
+        let child = self
+            .coordinator_command()?
+            .stdout(self.log(&name)?)
+            .stderr(self.log(&name)?)
+            .spawn()?;
+        self.coordinator = Some(child);
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Ok(r) = self.http.get(self.url("/readyz")).send().await
+                && r.status().is_success()
+            {
+                return Ok(());
+            }
+            ensure!(
+                Instant::now() < deadline,
+                "coordinator not ready; see {}",
+                self.dir.display()
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    fn create_key(&self, tenant: &str) -> anyhow::Result<String> {
+        let out = self
+            .coordinator_command()?
+            .args(["create-key", "--tenant", tenant])
+            .output()?;
+        ensure!(
+            out.status.success(),
+            "create-key failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let key = String::from_utf8(out.stdout)?.trim().to_string();
+        ensure!(key.starts_with("mak_"), "unexpected key output {key:?}");
+        Ok(key)
+    }
+
+    fn start_worker(&mut self, id: &str, delay_ms: u64) -> anyhow::Result<()> {
+        let child = Command::new(env!("CARGO_BIN_EXE_motionaug-worker"))
+            .env(
+                "MOTIONAUG_COORDINATOR_URL",
+                format!("http://127.0.0.1:{}", self.port),
+            )
+            .env("MOTIONAUG_WORKER_TOKEN", TOKEN)
+            .env("MOTIONAUG_WORKER_ID", id)
+            .env("MOTIONAUG_WORKER_TEST_DELAY_MS", delay_ms.to_string())
+            .env("RUST_LOG", "info")
+            .stdout(self.log(id)?)
+            .stderr(self.log(id)?)
+            .spawn()?;
+        self.workers.insert(id.to_string(), child);
+        Ok(())
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("http://127.0.0.1:{}{path}", self.port)
+    }
+
+    async fn upload_and_augment(&self) -> anyhow::Result<String> {
+        let mut form = Form::new().text("name", "e2e");
+        for name in ["HDM_bd.asf"].iter().chain(CLIPS) {
+            let bytes = std::fs::read(examples().join(name))?;
+            form = form.part("file", Part::bytes(bytes).file_name(name.to_string()));
+        }
+        let r = self
+            .http
+            .post(self.url("/v1/datasets"))
+            .bearer_auth(&self.key)
+            .multipart(form)
+            .send()
+            .await?;
+        ensure!(
+            r.status() == 201,
+            "upload: {} {}",
+            r.status(),
+            r.text().await?
+        );
+        let dataset: Value = r.json().await?;
+        ensure!(
+            dataset["clips"].as_array().map(Vec::len) == Some(CLIPS.len()),
+            "clips: {dataset}"
+        );
+        let r = self
+            .http
+            .post(self.url(&format!(
+                "/v1/datasets/{}/augmentations",
+                dataset["id"].as_str().unwrap()
+            )))
+            .bearer_auth(&self.key)
+            .json(&recipe())
+            .send()
+            .await?;
+        ensure!(
+            r.status() == 202,
+            "augment: {} {}",
+            r.status(),
+            r.text().await?
+        );
+        let aug: Value = r.json().await?;
+        Ok(aug["id"].as_str().context("augmentation id")?.to_string())
+    }
+
+    async fn status(&self, aug: &str) -> anyhow::Result<Value> {
+        let r = self
+            .http
+            .get(self.url(&format!("/v1/augmentations/{aug}")))
+            .bearer_auth(&self.key)
+            .send()
+            .await?;
+        ensure!(r.status().is_success(), "status: {}", r.status());
+        Ok(r.json().await?)
+    }
+
+    /// Waits until some job is running with at least one output stored; returns
+    /// (job id, worker id).
+    async fn job_in_progress(&self) -> anyhow::Result<(Uuid, String)> {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let row: Option<(Uuid, String)> = sqlx::query_as(
+                "SELECT j.id, j.worker_id FROM jobs j
+                 WHERE j.state = 'running' AND j.checkpoint IS NOT NULL
+                   AND (SELECT count(*) FROM artifacts a WHERE a.job_id = j.id) > 0
+                 ORDER BY j.seq LIMIT 1",
+            )
+            .fetch_optional(&self.db)
+            .await?;
+            if let Some(row) = row {
+                return Ok(row);
+            }
+            ensure!(
+                Instant::now() < deadline,
+                "no job made progress; see {}",
+                self.dir.display()
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    async fn wait_for(&self, aug: &str, wanted: &str, timeout: Duration) -> anyhow::Result<Value> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            // The coordinator may be restarting: ignore connection errors for a while.
+            if let Ok(status) = self.status(aug).await {
+                if status["status"] == wanted {
+                    return Ok(status);
+                }
+                ensure!(
+                    Instant::now() < deadline
+                        && !["failed", "cancelled"]
+                            .contains(&status["status"].as_str().unwrap_or("")),
+                    "augmentation did not reach {wanted}: {status}; logs in {}",
+                    self.dir.display()
+                );
+            } else {
+                ensure!(
+                    Instant::now() < deadline,
+                    "coordinator unreachable; logs in {}",
+                    self.dir.display()
+                );
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    /// Every job succeeded exactly once, no stray files, and the downloaded
+    /// results equal a local run of the synth crate, byte for byte.
+    async fn verify(&self, aug: &str) -> anyhow::Result<()> {
+        let status = self
+            .wait_for(aug, "succeeded", Duration::from_secs(120))
+            .await?;
+        ensure!(status["jobs"]["succeeded"] == CLIPS.len(), "{status}");
+        let jobs: Vec<(String, i32, i32)> =
+            sqlx::query_as("SELECT state, completions, attempts FROM jobs")
+                .fetch_all(&self.db)
+                .await?;
+        ensure!(jobs.len() == CLIPS.len(), "jobs: {jobs:?}");
+        for (state, completions, _) in &jobs {
+            ensure!(
+                state == "succeeded" && *completions == 1,
+                "a job did not complete exactly once: {jobs:?}"
+            );
+        }
+        let r = self
+            .http
+            .get(self.url(&format!("/v1/augmentations/{aug}/results")))
+            .bearer_auth(&self.key)
+            .send()
+            .await?;
+        ensure!(r.status().is_success(), "results: {}", r.status());
+        let bytes = r.bytes().await?.to_vec();
+        let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))?;
+        let mut got: HashMap<String, Vec<u8>> = HashMap::new();
+        for i in 0..zip.len() {
+            let mut f = zip.by_index(i)?;
+            let mut content = Vec::new();
+            f.read_to_end(&mut content)?;
+            got.insert(f.name()?.to_string(), content);
+        }
+        let (expected, manifest) = expected_outputs()?;
+        let stored: i64 = sqlx::query_scalar("SELECT count(*) FROM artifacts")
+            .fetch_one(&self.db)
+            .await?;
+        ensure!(
+            stored as usize == expected.len(),
+            "{stored} stored files, expected {}",
+            expected.len()
+        );
+        ensure!(
+            got.len() == expected.len() + 1,
+            "zip holds {} files, expected {}",
+            got.len(),
+            expected.len() + 1
+        );
+        for (name, content) in &expected {
+            let actual = got
+                .get(name)
+                .with_context(|| format!("{name} missing from the results"))?;
+            ensure!(actual == content, "{name} differs from a local run");
+        }
+        let got_manifest = String::from_utf8(got["manifest.json"].clone())?;
+        ensure!(
+            got_manifest == manifest,
+            "manifest.json differs from a local run"
+        );
+        Ok(())
+    }
+
+    /// Stops every process and drops the database; keeps the logs when asked.
+    async fn cleanup(mut self, keep_logs: bool) {
+        for (_, mut w) in std::mem::take(&mut self.workers) {
+            kill(&mut w);
+        }
+        if let Some(mut c) = self.coordinator.take() {
+            kill(&mut c);
+        }
+        self.stop_redis();
+        self.db.close().await;
+        if let Ok(mut admin) = PgConnection::connect(ADMIN_URL).await {
+            let _ = sqlx::query(sqlx::AssertSqlSafe(format!(
+                "DROP DATABASE IF EXISTS {} WITH (FORCE)",
+                self.db_name
+            )))
+            .execute(&mut admin)
+            .await;
+        }
+        if keep_logs {
+            eprintln!("logs kept in {}", self.dir.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        for w in self.workers.values_mut() {
+            kill(w);
+        }
+        if let Some(c) = self.coordinator.as_mut() {
+            kill(c);
+        }
+        if let Some(r) = self.redis.as_mut() {
+            kill(r);
+        }
+    }
+}
+
+/// What an uninterrupted run produces: every file by name, and manifest.json.
+fn expected_outputs() -> anyhow::Result<(BTreeMap<String, Vec<u8>>, String)> {
+    let recipe =
+        motionaug_protocol::recipe::parse(&recipe()).map_err(|e| anyhow::anyhow!(e.message))?;
+    let seed = recipe.effective_seed(None);
+    let asf = std::fs::read(examples().join("HDM_bd.asf"))?;
+    let mut files = BTreeMap::new();
+    let mut entries = Vec::new();
+    for name in CLIPS {
+        let bytes = std::fs::read(examples().join(name))?;
+        let (format, skeleton) = if name.ends_with(".amc") {
+            (
+                motionaug_protocol::ClipFormat::Amc,
+                Some(("HDM_bd.asf", asf.as_slice())),
+            )
+        } else {
+            (motionaug_protocol::ClipFormat::Bvh, None)
+        };
+        let motion = motionaug_protocol::clip::load(format, name, &bytes, skeleton)?;
+        let clip = name.rsplit_once('.').unwrap().0;
+        for job in recipe.jobs(clip, seed) {
+            let generated = synth::run_job(&recipe, clip, &motion, job)?;
+            let (out, entry) = motionaug_protocol::recipe::output_files(&generated, name)?;
+            files.extend(out);
+            entries.push(serde_json::to_value(entry)?);
+        }
+    }
+    Ok((files, motionaug_protocol::recipe::manifest_json(entries)?))
+}
+
+async fn with_cluster<F, Fut>(f: F) -> anyhow::Result<()>
+where
+    F: FnOnce(Cluster) -> Fut,
+    Fut: std::future::Future<Output = (Cluster, anyhow::Result<()>)>,
+{
+    let cluster = Cluster::start().await?;
+    let (cluster, result) = f(cluster).await;
+    cluster.cleanup(result.is_err()).await;
+    result
+}
+
+/// SIGKILL the worker of a job that has stored some outputs: the lease expires,
+/// another worker resumes from the checkpoint, every job completes exactly once.
+async fn worker_killed_mid_job() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            for i in 0..3 {
+                c.start_worker(&format!("w{i}"), 250)?;
+            }
+            let aug = c.upload_and_augment().await?;
+            let (job, worker) = c.job_in_progress().await?;
+            let mut child = c.workers.remove(&worker).context("worker process")?;
+            kill(&mut child);
+            c.verify(&aug).await?;
+            let (attempts, epochs): (i32, i64) = sqlx::query_as(
+                "SELECT j.attempts, (SELECT count(DISTINCT a.epoch) FROM artifacts a WHERE a.job_id = j.id)
+                 FROM jobs j WHERE j.id = $1",
+            )
+            .bind(job)
+            .fetch_one(&c.db)
+            .await?;
+            ensure!(attempts >= 2, "the killed job ran {attempts} time(s)");
+            // Files stored by the killed attempt were kept: the next attempt resumed
+            // from the checkpoint instead of starting over.
+            ensure!(epochs >= 2, "outputs of only {epochs} attempt(s) stored");
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// SIGTERM: the worker stops at its next checkpoint and releases the job without
+/// using up an attempt; another worker finishes it.
+async fn worker_sigterm_hands_job_back() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("first", 300)?;
+            let aug = c.upload_and_augment().await?;
+            let (job, worker) = c.job_in_progress().await?;
+            let mut child = c.workers.remove(&worker).context("worker process")?;
+            sigterm(&child)?;
+            let deadline = Instant::now() + Duration::from_secs(20);
+            loop {
+                if let Some(status) = child.try_wait()? {
+                    ensure!(status.success(), "worker exited with {status}");
+                    break;
+                }
+                ensure!(Instant::now() < deadline, "worker ignored SIGTERM");
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            let (state, attempts, has_checkpoint): (String, i32, bool) = sqlx::query_as(
+                "SELECT state, attempts, checkpoint IS NOT NULL FROM jobs WHERE id = $1",
+            )
+            .bind(job)
+            .fetch_one(&c.db)
+            .await?;
+            ensure!(
+                state == "queued" && attempts == 0 && has_checkpoint,
+                "after SIGTERM: {state}, {attempts} attempts"
+            );
+            c.start_worker("second", 0)?;
+            c.verify(&aug).await
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// SIGKILL the coordinator while jobs run and start a new one: workers retry
+/// their reports, and nothing is lost or done twice.
+async fn coordinator_restart() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            for i in 0..2 {
+                c.start_worker(&format!("w{i}"), 200)?;
+            }
+            let aug = c.upload_and_augment().await?;
+            c.job_in_progress().await?;
+            let mut old = c.coordinator.take().context("coordinator process")?;
+            kill(&mut old);
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            c.start_coordinator().await?;
+            c.verify(&aug).await
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// Flush Redis, then stop it while jobs run and an SSE client follows the
+/// augmentation; start it again later. Redis is only a hint channel, so work
+/// goes on, the SSE stream falls back to polling, and the results are complete.
+async fn redis_flushed_and_restarted() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            for i in 0..2 {
+                c.start_worker(&format!("w{i}"), 200)?;
+            }
+            let aug = c.upload_and_augment().await?;
+            let events = c
+                .http
+                .get(c.url(&format!("/v1/augmentations/{aug}/events")))
+                .bearer_auth(&c.key)
+                .send()
+                .await?;
+            ensure!(events.status().is_success(), "events: {}", events.status());
+            let follower = tokio::spawn(async move {
+                let mut text = String::new();
+                let mut events = events;
+                while let Ok(Some(chunk)) = events.chunk().await {
+                    text.push_str(&String::from_utf8_lossy(&chunk));
+                }
+                text
+            });
+            c.job_in_progress().await?;
+            let out = Command::new("redis-cli")
+                .args(["-p", &c.redis_port.to_string(), "FLUSHALL"])
+                .output()?;
+            ensure!(out.status.success(), "FLUSHALL failed");
+            c.stop_redis();
+            let before = c.status(&aug).await?["progress"].as_f64().unwrap_or(0.0);
+            let deadline = Instant::now() + Duration::from_secs(30);
+            loop {
+                let status = c.status(&aug).await?;
+                if status["progress"].as_f64().unwrap_or(0.0) > before
+                    || status["status"] == "succeeded"
+                {
+                    break;
+                }
+                ensure!(
+                    Instant::now() < deadline,
+                    "no progress while Redis is down: {status}"
+                );
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            let ready: Value = c.http.get(c.url("/readyz")).send().await?.json().await?;
+            ensure!(ready["redis"] == "unreachable", "readyz: {ready}");
+            c.start_redis().await?;
+            c.verify(&aug).await?;
+            let text = tokio::time::timeout(Duration::from_secs(20), follower).await??;
+            let last = text
+                .lines()
+                .filter_map(|l| l.strip_prefix("data: "))
+                .last()
+                .context("no SSE data")?;
+            let last: Value = serde_json::from_str(last)?;
+            ensure!(last["status"] == "succeeded", "last SSE event: {last}");
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
