@@ -164,6 +164,14 @@ fn checkpoint_dirs(dir: &Path) -> Result<Vec<String>> {
 }
 
 fn prune(dir: &Path, current: &str, keep: usize) -> Result<()> {
+    // Temporary directories left by a crash in the middle of a save.
+    for entry in fs::read_dir(dir).map_err(|e| PpoError::io(dir, e))? {
+        let entry = entry.map_err(|e| PpoError::io(dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with(".ckpt-") && name.contains(".tmp") && entry.path().is_dir() {
+            fs::remove_dir_all(entry.path()).map_err(|e| PpoError::io(entry.path(), e))?;
+        }
+    }
     let names = checkpoint_dirs(dir)?;
     let excess = names.len().saturating_sub(keep);
     for name in names.iter().take(excess).filter(|n| n.as_str() != current) {
@@ -216,4 +224,62 @@ pub fn load(path: &Path) -> Result<(CheckpointMeta, HashMap<String, Tensor>)> {
     let tensors = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
         .map_err(|e| PpoError::checkpoint(&tensors_path, format!("bad tensors: {e}")))?;
     Ok((meta, tensors))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn meta(iterations: u64) -> CheckpointMeta {
+        let progress = Progress {
+            iterations,
+            ..Progress::default()
+        };
+        let rng = EnvRng::seed_from_u64(9);
+        CheckpointMeta::new(2, 1, PpoConfig::default(), progress, &rng, 0, 0)
+    }
+
+    #[test]
+    fn rng_state_round_trips() {
+        use rand::RngCore;
+        let mut rng = EnvRng::seed_from_u64(42);
+        for _ in 0..13 {
+            rng.next_u32();
+        }
+        let mut back = RngState::capture(&rng).restore().unwrap();
+        assert_eq!(rng.next_u64(), back.next_u64());
+        let bad = RngState {
+            seed_hex: "zz".into(),
+            stream: 0,
+            word_pos: "0".into(),
+        };
+        assert!(bad.restore().is_err());
+    }
+
+    #[test]
+    fn latest_falls_back_to_newest_complete_checkpoint() {
+        let dir = std::env::temp_dir().join(format!("ppo-ckpt-unit-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        assert_eq!(latest_checkpoint(&dir).unwrap(), None);
+        let t = vec![(
+            "x".to_string(),
+            Tensor::from_slice(&[1.0f32, 2.0], 2, &Device::Cpu).unwrap(),
+        )];
+        let first = save(&dir, &meta(1), &t, 5).unwrap();
+        let second = save(&dir, &meta(2), &t, 5).unwrap();
+        assert_eq!(latest_checkpoint(&dir).unwrap(), Some(second.clone()));
+        let (m, tensors) = load(&second).unwrap();
+        assert_eq!(m.progress.iterations, 2);
+        assert_eq!(tensors["x"].to_vec1::<f32>().unwrap(), vec![1.0, 2.0]);
+        // A crash that left a half-written newer checkpoint and a stale LATEST.
+        fs::create_dir(dir.join("ckpt-99999999-0000000000000")).unwrap();
+        fs::write(dir.join(LATEST_FILE), "ckpt-missing").unwrap();
+        fs::remove_dir_all(&second).unwrap();
+        assert_eq!(latest_checkpoint(&dir).unwrap(), Some(first.clone()));
+        // A corrupt state file is an error naming the file.
+        fs::write(first.join(STATE_FILE), "{").unwrap();
+        let err = load(&first).err().unwrap().to_string();
+        assert!(err.contains(STATE_FILE), "{err}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 }
