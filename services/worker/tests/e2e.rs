@@ -39,7 +39,8 @@ fn main() {
         return;
     }
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-'));
-    let scenarios: Vec<(&str, fn() -> anyhow::Result<()>)> = vec![
+    type Scenario = fn() -> anyhow::Result<()>;
+    let scenarios: Vec<(&str, Scenario)> = vec![
         (
             "worker_killed_mid_job",
             || block_on(worker_killed_mid_job()),
@@ -690,8 +691,8 @@ async fn redis_flushed_and_restarted() -> anyhow::Result<()> {
             let text = tokio::time::timeout(Duration::from_secs(20), follower).await??;
             let last = text
                 .lines()
-                .filter_map(|l| l.strip_prefix("data: "))
-                .last()
+                .rev()
+                .find_map(|l| l.strip_prefix("data: "))
                 .context("no SSE data")?;
             let last: Value = serde_json::from_str(last)?;
             ensure!(last["status"] == "succeeded", "last SSE event: {last}");
