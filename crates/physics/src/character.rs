@@ -561,9 +561,8 @@ impl<'a> Builder<'a> {
         // Facing and lateral directions from the feet.
         let mut fwd = DVec3::ZERO;
         for chain in &leg_chains {
-            let (_, lower, end) = self.split_limb(chain, "leg")?;
+            let (_, _, end) = self.split_limb(chain, "leg")?;
             let foot = end.ok_or_else(|| bad("leg without a foot"))?;
-            let _ = lower;
             let leaf = *chain.last().unwrap_or(&foot);
             let d = self.tip[leaf] - self.pos[foot];
             fwd += DVec3::new(d.x, 0.0, d.z);
@@ -720,10 +719,9 @@ impl<'a> Builder<'a> {
                 .filter(|d| self.sk.parent(d.0).is_some_and(|pj| body_of(pj) == b))
                 .map(|d| d.0)
                 .collect();
-            let main_child = |r: Role| -> Option<DVec3> {
-                let _ = r;
-                child_drivers.first().map(|&cj| self.pos[cj] - origin)
-            };
+            // The segment to the (single) child body of a limb.
+            let main_child =
+                || -> Option<DVec3> { child_drivers.first().map(|&cj| self.pos[cj] - origin) };
             let far_tip = || -> DVec3 {
                 let mut best = DVec3::ZERO;
                 for &k in &members {
@@ -801,7 +799,7 @@ impl<'a> Builder<'a> {
                     }
                 }
                 Role::UpperLeg(_) | Role::LowerLeg(_) | Role::UpperArm(_) | Role::ForeArm(_) => {
-                    let end = main_child(role).unwrap_or_else(far_tip);
+                    let end = main_child().unwrap_or_else(far_tip);
                     let r = match role {
                         Role::UpperLeg(_) => 0.06,
                         Role::LowerLeg(_) => 0.05,
@@ -876,7 +874,7 @@ impl<'a> Builder<'a> {
             };
             let hinge = match role {
                 Role::LowerLeg(_) | Role::ForeArm(_) => {
-                    let seg = main_child(role).unwrap_or_else(far_tip);
+                    let seg = main_child().unwrap_or_else(far_tip);
                     let axis = if matches!(role, Role::LowerLeg(_)) {
                         fwd.cross(seg)
                     } else {
