@@ -130,7 +130,13 @@ pub struct StepInfo {
 pub struct StepResult {
     pub reward: f32,
     pub r_imit: f32,
+    /// `terminated || truncated`.
     pub done: bool,
+    /// The episode failed: a fall, or the simulation produced non-finite values
+    /// (the observation is then zeroed where it was not finite).
+    pub terminated: bool,
+    /// The clip ended.
+    pub truncated: bool,
     pub info: StepInfo,
 }
 
@@ -346,6 +352,7 @@ impl ImitationEnv {
         if k + 1 >= self.reference.len() {
             return Ok(StepResult {
                 done: true,
+                truncated: true,
                 info: StepInfo {
                     frame: k,
                     ..Default::default()
@@ -436,15 +443,26 @@ impl ImitationEnv {
                 (-0.01 * (f * f + t * t).sqrt()).exp()
             }
         };
-        let (reward, r_imit) = if fell {
+        let mut broken = false;
+        for v in &mut self.obs {
+            if !v.is_finite() {
+                *v = 0.0;
+                broken = true;
+            }
+        }
+        let (reward, r_imit) = if fell || broken || !r_imit.is_finite() {
             (0.0, 0.0)
         } else {
             (0.9 * r_imit + 0.1 * r_res, r_imit)
         };
+        let terminated = fell || broken;
+        let truncated = !terminated && self.frame + 1 >= self.reference.len();
         Ok(StepResult {
             reward,
             r_imit,
-            done: fell || self.frame + 1 >= self.reference.len(),
+            done: terminated || truncated,
+            terminated,
+            truncated,
             info: StepInfo {
                 residual_force: sum_f * inv,
                 residual_torque: sum_t * inv,
