@@ -76,7 +76,7 @@ fn main() {
         };
         match physics::bench::bench_physics_for(&motion, &cfg, 2.0) {
             Ok(r) => println!(
-                "dt 1/{:.0} iters {:2}: {:6.1} sim s/wall s, {:6.1} us/step, joint error {:.4} rad, falls {} in {} passes, r_imit {:.3}",
+                "dt 1/{:.0} iters {:2}: {:6.1} sim s/wall s, {:6.1} us/step, joint error {:.4} rad, falls {} in {} passes, r_imit {:.3}, residual force ratio {:.3}",
                 1.0 / r.dt,
                 r.solver_iterations,
                 r.sim_seconds_per_wall_second,
@@ -84,7 +84,8 @@ fn main() {
                 r.mean_joint_error_rad,
                 r.falls,
                 r.passes,
-                r.mean_imitation_reward
+                r.mean_imitation_reward,
+                r.residual_force_ratio
             ),
             Err(e) => println!("dt {dt}: {e}"),
         }

@@ -30,6 +30,8 @@ pub struct BenchReport {
     /// Falls (a pass that ends in a fall restarts at the next frame).
     pub falls: usize,
     pub mean_imitation_reward: f64,
+    /// Mean |F_res| / (body mass * g) over the steps (the report's `residual_force_ratio`).
+    pub residual_force_ratio: f64,
 }
 
 /// [`bench_physics_for`] timing at least two seconds of stepping.
@@ -52,7 +54,7 @@ pub fn bench_physics_for(
     let action = vec![0.0f32; env.act_dim()];
     let substeps = cfg.substeps()?;
     let (mut steps, mut passes, mut falls) = (0usize, 0usize, 0usize);
-    let (mut err_sum, mut rew_sum) = (0.0f64, 0.0f64);
+    let (mut err_sum, mut rew_sum, mut force_sum) = (0.0f64, 0.0f64, 0.0f64);
     let mut wall = 0.0f64;
     while passes == 0 || wall < min_wall_s {
         env.reset(0.0);
@@ -64,6 +66,7 @@ pub fn bench_physics_for(
             steps += 1;
             err_sum += env.joint_error() as f64;
             rew_sum += r.r_imit as f64;
+            force_sum += r.info.residual_force as f64;
             if r.info.fell {
                 falls += 1;
                 let last = env.reference().len() - 1;
@@ -97,5 +100,8 @@ pub fn bench_physics_for(
         passes,
         falls,
         mean_imitation_reward: rew_sum / steps.max(1) as f64,
+        residual_force_ratio: force_sum
+            / steps.max(1) as f64
+            / (env.spec().total_mass as f64 * cfg.sim.gravity as f64),
     })
 }
