@@ -1,0 +1,231 @@
+//! Motion <-> per-frame feature vectors, the representation the VAE (and later the
+//! debiasing and evaluation code) works in.
+//!
+//! A frame is `[root x, root y, root z, 6D rotation of joint 0, ..., of joint J-1]`,
+//! `3 + 6 J` numbers:
+//! * root position: the clip is moved so that the first frame's root lies above
+//!   the origin (x = z = 0; the height y is kept), and, with `heading_normalise`,
+//!   rotated about the vertical so that the first frame's root faces +z. Every clip
+//!   of a class then starts in the same place and direction, which is what lets a
+//!   handful of clips share one latent space.
+//! * 6D rotation (Zhou et al. 2019): the first two columns of the local rotation
+//!   matrix, continuous unlike quaternions or Euler angles. Back to a rotation by
+//!   Gram-Schmidt, so any 6 numbers (a network's output) give a valid rotation.
+//!
+//! The conversion is exact up to rounding in both directions (for the canonical
+//! placement): `frames_to_motion(motion_to_frames(m))` is `m` moved to the origin.
+
+use std::sync::Arc;
+
+use motion::glam::{DMat3, DQuat, DVec3};
+use motion::{Motion, Skeleton};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, VaeError};
+
+/// How clips become frames.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FeatureConfig {
+    /// Frame rate the clips are resampled to before conversion (30 in the paper).
+    pub fps: f64,
+    /// Rotate each clip about y so that its first frame's root faces +z.
+    pub heading_normalise: bool,
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        FeatureConfig {
+            fps: 30.0,
+            heading_normalise: true,
+        }
+    }
+}
+
+/// Numbers per frame for a skeleton of `joints` joints.
+pub fn frame_dim(joints: usize) -> usize {
+    3 + 6 * joints
+}
+
+/// Heading of a root rotation: the angle about +y of its forward (+z) axis
+/// projected on the ground plane (0 when it faces +z).
+pub fn heading(root_rotation: DQuat) -> f64 {
+    let f = root_rotation * DVec3::Z;
+    if f.x.abs() < 1e-9 && f.z.abs() < 1e-9 {
+        // Facing straight up or down: use the up axis' projection instead.
+        let u = root_rotation * DVec3::Y;
+        return u.x.atan2(u.z);
+    }
+    f.x.atan2(f.z)
+}
+
+/// First two columns of the rotation matrix of `q`.
+pub fn quat_to_6d(q: DQuat) -> [f64; 6] {
+    let a = q * DVec3::X;
+    let b = q * DVec3::Y;
+    [a.x, a.y, a.z, b.x, b.y, b.z]
+}
+
+/// Gram-Schmidt on two 3-vectors; degenerate inputs (zero or parallel columns)
+/// fall back to the nearest well-defined axis so that the result is always a rotation.
+pub fn rotation_from_6d(v: &[f64]) -> DQuat {
+    let a = DVec3::new(v[0], v[1], v[2]);
+    let b = DVec3::new(v[3], v[4], v[5]);
+    let x = a.try_normalize().unwrap_or(DVec3::X);
+    let mut y = b - x * x.dot(b);
+    if y.length_squared() < 1e-18 {
+        y = x.any_orthonormal_vector();
+    }
+    let y = y.normalize();
+    let z = x.cross(y);
+    DQuat::from_mat3(&DMat3::from_cols(x, y, z)).normalize()
+}
+
+/// The frames of a clip (already at the wanted frame rate), row-major
+/// `[frame][3 + 6 J]`, f32.
+pub fn motion_to_frames(motion: &Motion, config: &FeatureConfig) -> Vec<f32> {
+    let joints = motion.joints();
+    let dim = frame_dim(joints);
+    let root0 = motion.root_translation()[0];
+    let origin = DVec3::new(root0.x, 0.0, root0.z);
+    let turn = if config.heading_normalise {
+        DQuat::from_rotation_y(-heading(motion.rotation(0, 0)))
+    } else {
+        DQuat::IDENTITY
+    };
+    let mut out = Vec::with_capacity(motion.frames() * dim);
+    for t in 0..motion.frames() {
+        let p = turn * (motion.root_translation()[t] - origin);
+        out.extend([p.x as f32, p.y as f32, p.z as f32]);
+        for (j, &q) in motion.pose(t).iter().enumerate() {
+            let q = if j == 0 { turn * q } else { q };
+            out.extend(quat_to_6d(q).map(|x| x as f32));
+        }
+    }
+    out
+}
+
+/// A clip on `skeleton` from frames laid out as [`motion_to_frames`] writes them.
+pub fn frames_to_motion(skeleton: &Arc<Skeleton>, fps: f64, frames: &[f32]) -> Result<Motion> {
+    let joints = skeleton.len();
+    let dim = frame_dim(joints);
+    if frames.is_empty() || !frames.len().is_multiple_of(dim) {
+        return Err(VaeError::Data(format!(
+            "{} numbers are not whole frames of {dim} for a {joints}-joint skeleton",
+            frames.len()
+        )));
+    }
+    let n = frames.len() / dim;
+    let mut root = Vec::with_capacity(n);
+    let mut rotations = Vec::with_capacity(n * joints);
+    let mut six = [0.0f64; 6];
+    for frame in frames.chunks_exact(dim) {
+        root.push(DVec3::new(
+            frame[0] as f64,
+            frame[1] as f64,
+            frame[2] as f64,
+        ));
+        for j in 0..joints {
+            for (k, s) in six.iter_mut().enumerate() {
+                *s = frame[3 + 6 * j + k] as f64;
+            }
+            rotations.push(rotation_from_6d(&six));
+        }
+    }
+    Ok(Motion::new(skeleton.clone(), fps, root, rotations)?)
+}
+
+/// Resample a clip to `config.fps` (when it is not already there) and convert it.
+pub fn clip_frames(motion: &Motion, config: &FeatureConfig) -> Result<Vec<f32>> {
+    if (motion.fps() - config.fps).abs() < 1e-9 {
+        Ok(motion_to_frames(motion, config))
+    } else {
+        let m = motion::resample::resample(motion, config.fps)?;
+        Ok(motion_to_frames(&m, config))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motion::Joint;
+    use proptest::prelude::*;
+
+    fn skeleton() -> Arc<Skeleton> {
+        let joint = |name: &str, parent, offset| Joint {
+            name: name.into(),
+            parent,
+            offset,
+            channels: vec![],
+            end_site: None,
+            limits: None,
+        };
+        Arc::new(
+            Skeleton::new(
+                vec![
+                    joint("root", None, DVec3::ZERO),
+                    joint("a", Some(0), DVec3::new(0.0, 0.5, 0.0)),
+                ],
+                1.0,
+            )
+            .unwrap(),
+        )
+    }
+
+    fn quat(v: [f64; 4]) -> DQuat {
+        DQuat::from_xyzw(v[0], v[1], v[2], v[3]).normalize()
+    }
+
+    proptest! {
+        #[test]
+        fn six_d_round_trips(v in prop::array::uniform4(-1.0f64..1.0)) {
+            prop_assume!(DQuat::from_array(v).length() > 0.1);
+            let q = quat(v);
+            let back = rotation_from_6d(&quat_to_6d(q));
+            prop_assert!(motion::rotation::angle_between(q, back) < 1e-9);
+        }
+
+        #[test]
+        fn any_six_numbers_give_a_rotation(v in prop::array::uniform6(-3.0f64..3.0)) {
+            let q = rotation_from_6d(&v);
+            prop_assert!((q.length() - 1.0).abs() < 1e-9);
+        }
+
+        #[test]
+        fn frames_round_trip_to_the_canonical_clip(
+            r0 in prop::array::uniform4(-1.0f64..1.0),
+            r1 in prop::array::uniform4(-1.0f64..1.0),
+            yaw in -3.0f64..3.0,
+            start in prop::array::uniform3(-5.0f64..5.0),
+        ) {
+            prop_assume!(DQuat::from_array(r0).length() > 0.1 && DQuat::from_array(r1).length() > 0.1);
+            let s = skeleton();
+            let root0 = DQuat::from_rotation_y(yaw) * quat(r0);
+            let roots = vec![DVec3::from(start), DVec3::from(start) + DVec3::new(0.3, 0.1, -0.2)];
+            let rots = vec![root0, quat(r1), quat(r1), root0];
+            let m = Motion::new(s.clone(), 30.0, roots, rots).unwrap();
+            let config = FeatureConfig::default();
+            let frames = motion_to_frames(&m, &config);
+            prop_assert_eq!(frames.len(), 2 * frame_dim(2));
+            let back = frames_to_motion(&s, 30.0, &frames).unwrap();
+            // First frame: above the origin, facing +z, same height.
+            let p0 = back.root_translation()[0];
+            prop_assert!(p0.x.abs() < 1e-6 && p0.z.abs() < 1e-6);
+            prop_assert!((p0.y - start[1]).abs() < 1e-5);
+            prop_assert!(heading(back.rotation(0, 0)).abs() < 1e-5);
+            // Non-root rotations unchanged; relative root motion only turned.
+            prop_assert!(motion::rotation::angle_between(back.rotation(0, 1), quat(r1)) < 1e-5);
+            let step = back.root_translation()[1] - p0;
+            prop_assert!((step.length() - DVec3::new(0.3, 0.1, -0.2).length()).abs() < 1e-5);
+            // Relative root rotation between frames is preserved.
+            let rel_a = m.rotation(0, 0).inverse() * m.rotation(1, 0);
+            let rel_b = back.rotation(0, 0).inverse() * back.rotation(1, 0);
+            prop_assert!(motion::rotation::angle_between(rel_a, rel_b) < 1e-5);
+        }
+    }
+
+    #[test]
+    fn rejects_partial_frames() {
+        assert!(frames_to_motion(&skeleton(), 30.0, &[0.0; 16]).is_err());
+        assert!(frames_to_motion(&skeleton(), 30.0, &[]).is_err());
+    }
+}

@@ -1,0 +1,35 @@
+//! MotionAug's motion VAE (Sec. 3.1) on candle, CPU.
+//!
+//! Train one model per action class on 30 fps clips ([`train()`]), then sample new
+//! clips from the N(0, I) prior or by "sampling near samples"
+//! ([`TrainedVae::sample`]). Models save to a directory (safetensors + JSON).
+//!
+//! * [`features`]: motion <-> per-frame vectors (root position + 6D rotations),
+//!   reusable by debiasing and evaluation code.
+//! * [`lstm`]: LSTM / BiLSTM with one fused input projection per sequence.
+//! * [`model`]: encoder, decoder, frame and sequence discriminators.
+//! * [`loss`], [`optim`], [`train`]: losses, SGD/Adam, the training loop.
+//! * [`latent`]: PCA + k-means clustering of training posteriors, near sampling.
+//! * [`trained`]: a trained model: encode, decode, sample, save, load.
+
+pub mod data;
+pub mod error;
+pub mod features;
+pub mod latent;
+pub mod loss;
+pub mod lstm;
+pub mod model;
+pub mod nn;
+pub mod normalize;
+pub mod optim;
+pub mod params;
+pub mod train;
+pub mod trained;
+
+pub use error::{Result, VaeError};
+pub use features::FeatureConfig;
+pub use latent::{NearConfig, Prior};
+pub use model::VaeConfig;
+pub use optim::OptimizerConfig;
+pub use train::{Losses, Progress, TrainConfig, Trainer, train};
+pub use trained::{ReconstructionError, Sample, TrainedVae};

@@ -1,0 +1,224 @@
+//! The VAE's training losses, on candle tensors so that they differentiate.
+//!
+//! Reconstruction is measured in physical units, not normalised features: the
+//! decoder output is denormalised, its root position compared in metres and its
+//! 6D rotations turned into rotation matrices (Gram-Schmidt) and compared entry by
+//! entry (MotionAug: "MSE on root position and rotation matrices"). Smoothness
+//! penalises squared frame-to-frame differences of the denormalised output; KL is
+//! the usual Gaussian term; the adversarial terms are hinge losses.
+//! Every mean is over valid frames only.
+
+use candle_core::{D, Device, Tensor};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, VaeError};
+use crate::normalize::NormStats;
+
+/// Weights of the loss terms (reconstruction has weight 1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LossWeights {
+    pub smooth: f64,
+    /// On the KL term averaged over latent dimensions (see `kl`).
+    pub kl: f64,
+    /// On the generator's adversarial terms (frame + sequence). The notes give no
+    /// number; 0.01 keeps them below the reconstruction error of a trained model.
+    pub adversarial: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        LossWeights {
+            smooth: 0.001,
+            kl: 0.01,
+            adversarial: 0.01,
+        }
+    }
+}
+
+impl LossWeights {
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("smooth", self.smooth),
+            ("kl", self.kl),
+            ("adversarial", self.adversarial),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(VaeError::Config(format!(
+                    "loss weight {name} = {v}: must be a finite number >= 0"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Normalisation statistics as broadcastable tensors.
+pub struct Denorm {
+    mean: Tensor,
+    std: Tensor,
+}
+
+impl Denorm {
+    pub fn new(stats: &NormStats) -> Result<Self> {
+        Ok(Denorm {
+            mean: Tensor::from_slice(&stats.mean, stats.dim(), &Device::Cpu)?,
+            std: Tensor::from_slice(&stats.std, stats.dim(), &Device::Cpu)?,
+        })
+    }
+
+    pub fn apply(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(x.broadcast_mul(&self.std)?.broadcast_add(&self.mean)?)
+    }
+}
+
+/// `(B, T, 3 + 6J)` raw frames -> `(B, T, 9J)` rotation matrices, rows of
+/// `[x axis, y axis, z axis]` per joint.
+pub fn rotation_matrices(raw: &Tensor) -> Result<Tensor> {
+    let (b, t, f) = raw.dims3()?;
+    let joints = (f - 3) / 6;
+    let six = raw.narrow(2, 3, 6 * joints)?.reshape((b, t, joints, 6))?;
+    let unit = |v: &Tensor| -> Result<Tensor> {
+        let n = (v.sqr()?.sum_keepdim(D::Minus1)? + 1e-8)?.sqrt()?;
+        Ok(v.broadcast_div(&n)?)
+    };
+    let x = unit(&six.narrow(3, 0, 3)?)?;
+    let a2 = six.narrow(3, 3, 3)?;
+    let proj = (&x * &a2)?.sum_keepdim(D::Minus1)?;
+    let y = unit(&(a2 - x.broadcast_mul(&proj)?)?)?;
+    let c = |v: &Tensor, k: usize| v.narrow(3, k, 1);
+    let z = Tensor::cat(
+        &[
+            ((c(&x, 1)? * c(&y, 2)?)? - (c(&x, 2)? * c(&y, 1)?)?)?,
+            ((c(&x, 2)? * c(&y, 0)?)? - (c(&x, 0)? * c(&y, 2)?)?)?,
+            ((c(&x, 0)? * c(&y, 1)?)? - (c(&x, 1)? * c(&y, 0)?)?)?,
+        ],
+        3,
+    )?;
+    Ok(Tensor::cat(&[x, y, z], 3)?.reshape((b, t, 9 * joints))?)
+}
+
+/// Mean over valid frames of a per-frame value `(B, T)`.
+pub fn masked_frame_mean(per_frame: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    let n = mask.sum_all()?.clamp(1.0, f64::INFINITY)?;
+    Ok((per_frame * mask)?.sum_all()?.broadcast_div(&n)?)
+}
+
+/// Reconstruction terms: `(root MSE in m^2, rotation-matrix MSE)`.
+pub fn reconstruction(
+    pred_raw: &Tensor,
+    target_raw: &Tensor,
+    target_rotmat: &Tensor,
+    mask: &Tensor,
+) -> Result<(Tensor, Tensor)> {
+    let root = (pred_raw.narrow(2, 0, 3)? - target_raw.narrow(2, 0, 3)?)?
+        .sqr()?
+        .mean(D::Minus1)?;
+    let rot = (rotation_matrices(pred_raw)? - target_rotmat)?
+        .sqr()?
+        .mean(D::Minus1)?;
+    Ok((
+        masked_frame_mean(&root, mask)?,
+        masked_frame_mean(&rot, mask)?,
+    ))
+}
+
+/// Mean squared difference between consecutive valid frames.
+pub fn smoothness(raw: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    let t = raw.dim(1)?;
+    if t < 2 {
+        return Ok(Tensor::zeros((), raw.dtype(), raw.device())?);
+    }
+    let d = (raw.narrow(1, 1, t - 1)? - raw.narrow(1, 0, t - 1)?)?
+        .sqr()?
+        .mean(D::Minus1)?;
+    // Padding is at the end: frame t+1 valid implies frame t valid.
+    masked_frame_mean(&d, &mask.narrow(1, 1, t - 1)?)
+}
+
+/// KL(N(mu, sigma^2) || N(0, I)), averaged over the batch and latent dimensions.
+pub fn kl(mu: &Tensor, logvar: &Tensor) -> Result<Tensor> {
+    let inner = ((logvar + 1.0)? - mu.sqr()?)? - logvar.exp()?;
+    Ok((inner?.mean_all()? * -0.5)?)
+}
+
+/// Hinge loss of a discriminator: `mean relu(1 - real) + mean relu(1 + fake)`.
+/// Scores are `(B, T)` with a mask, or `(B,)` with `None`.
+pub fn hinge_discriminator(real: &Tensor, fake: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+    let r = (1.0 - real)?.relu()?;
+    let f = (fake + 1.0)?.relu()?;
+    match mask {
+        Some(m) => Ok((masked_frame_mean(&r, m)? + masked_frame_mean(&f, m)?)?),
+        None => Ok((r.mean_all()? + f.mean_all()?)?),
+    }
+}
+
+/// The generator's hinge term: `-mean fake`.
+pub fn hinge_generator(fake: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+    match mask {
+        Some(m) => Ok(masked_frame_mean(fake, m)?.neg()?),
+        None => Ok(fake.mean_all()?.neg()?),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::quat_to_6d;
+    use motion::glam::{DMat3, DQuat};
+
+    #[test]
+    fn rotation_matrices_match_glam() {
+        let q = DQuat::from_euler(motion::glam::EulerRot::YXZ, 0.3, -1.1, 2.0);
+        let mut frame = vec![0.5f32, 1.0, -0.2];
+        // Scaled, non-orthogonal 6D input still gives the same rotation.
+        let s = quat_to_6d(q);
+        frame.extend([s[0] * 2.0, s[1] * 2.0, s[2] * 2.0].map(|v| v as f32));
+        frame.extend([s[3] + 0.3 * s[0], s[4] + 0.3 * s[1], s[5] + 0.3 * s[2]].map(|v| v as f32));
+        let t = Tensor::from_vec(frame, (1, 1, 9), &Device::Cpu).unwrap();
+        let m = rotation_matrices(&t)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        let r = DMat3::from_quat(q);
+        let expect: Vec<f64> = [r.x_axis, r.y_axis, r.z_axis]
+            .iter()
+            .flat_map(|c| c.to_array())
+            .collect();
+        for (a, b) in m.iter().zip(&expect) {
+            assert!((*a as f64 - b).abs() < 1e-5, "{m:?} vs {expect:?}");
+        }
+    }
+
+    #[test]
+    fn kl_is_zero_at_the_prior_and_positive_elsewhere() {
+        let z = Tensor::zeros((2, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let k = kl(&z, &z).unwrap().to_scalar::<f32>().unwrap();
+        assert!(k.abs() < 1e-7);
+        let mu = Tensor::ones((2, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let k = kl(&mu, &z).unwrap().to_scalar::<f32>().unwrap();
+        assert!((k - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn hinge_is_zero_for_a_confident_correct_discriminator() {
+        let real = Tensor::new(&[2f32, 1.5], &Device::Cpu).unwrap();
+        let fake = Tensor::new(&[-1f32, -3.0], &Device::Cpu).unwrap();
+        let d = hinge_discriminator(&real, &fake, None)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert_eq!(d, 0.0);
+        let d = hinge_discriminator(&fake, &real, None)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert!(d > 2.0);
+        let g = hinge_generator(&fake, None)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert_eq!(g, 2.0);
+    }
+}

@@ -1,0 +1,325 @@
+//! Training one VAE on the clips of one action class.
+//!
+//! Each iteration: encode a batch, draw z with the reparameterisation trick (noise
+//! from a seeded ChaCha RNG, so runs are reproducible), decode, and step the
+//! generator (encoder + decoder) on reconstruction + smoothness + KL (+ the
+//! adversarial hinge terms). With adversarial training the two discriminators then
+//! take one step on real clips vs the (detached) reconstructions.
+
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use motion::Motion;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Batch, Dataset};
+use crate::error::{Result, VaeError};
+use crate::features::FeatureConfig;
+use crate::latent::{LatentStats, NearConfig};
+use crate::loss::{self, Denorm, LossWeights};
+use crate::model::{DISCRIMINATORS, GENERATOR, Vae, VaeConfig};
+use crate::optim::{Optimizer, OptimizerConfig};
+use crate::trained::{ModelMeta, TrainedVae, TrainingSummary};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    pub model: VaeConfig,
+    pub features: FeatureConfig,
+    /// Used for the generator and (a fresh copy) for the discriminators.
+    pub optimizer: OptimizerConfig,
+    pub iterations: u64,
+    /// Clips per iteration; a class smaller than this is one full batch.
+    pub batch_size: usize,
+    pub adversarial: bool,
+    pub weights: LossWeights,
+    /// Global gradient-norm clip for both optimisers (LSTMs like it).
+    pub max_grad_norm: Option<f32>,
+    pub near: NearConfig,
+    pub seed: u64,
+}
+
+impl Default for TrainConfig {
+    /// Small model, Adam 1e-3, 1500 iterations, adversarial on.
+    fn default() -> Self {
+        TrainConfig {
+            model: VaeConfig::default(),
+            features: FeatureConfig::default(),
+            optimizer: OptimizerConfig::default(),
+            iterations: 1500,
+            batch_size: 128,
+            adversarial: true,
+            weights: LossWeights::default(),
+            max_grad_norm: Some(1.0),
+            near: NearConfig::default(),
+            seed: 0,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The MotionAug reference: paper sizes, SGD lr 0.005 halved every 4000 of
+    /// 20000 iterations, batch 128.
+    pub fn reference() -> Self {
+        TrainConfig {
+            model: VaeConfig::reference(),
+            optimizer: OptimizerConfig::reference(),
+            iterations: 20_000,
+            ..TrainConfig::default()
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        self.model.validate()?;
+        self.optimizer.validate()?;
+        self.weights.validate()?;
+        self.near.validate()?;
+        if self.iterations == 0 || self.batch_size == 0 {
+            return Err(VaeError::Config(
+                "iterations and batch_size must be >= 1".into(),
+            ));
+        }
+        if !(self.features.fps.is_finite() && self.features.fps > 0.0) {
+            return Err(VaeError::Config(format!(
+                "feature frame rate {} must be > 0",
+                self.features.fps
+            )));
+        }
+        if self
+            .max_grad_norm
+            .is_some_and(|m| !(m.is_finite() && m > 0.0))
+        {
+            return Err(VaeError::Config("max_grad_norm must be > 0".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Loss values of one iteration (the generator's terms are unweighted).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Losses {
+    /// Root position MSE, m^2.
+    pub root: f32,
+    /// Rotation-matrix entry MSE.
+    pub rotation: f32,
+    pub smooth: f32,
+    pub kl: f32,
+    /// Generator hinge term (frame + sequence), 0 without adversarial training.
+    pub adversarial: f32,
+    /// Discriminator hinge loss (frame + sequence), 0 without adversarial training.
+    pub discriminator: f32,
+    /// Weighted total the generator minimised.
+    pub total: f32,
+}
+
+/// Reported to the caller after every iteration.
+pub struct Progress<'a> {
+    pub iteration: u64,
+    pub iterations: u64,
+    pub lr: f64,
+    pub losses: &'a Losses,
+}
+
+/// One training step's state; `step` is public so the bench can time it.
+pub struct Trainer {
+    pub vae: Vae,
+    pub data: Dataset,
+    config: TrainConfig,
+    denorm: Denorm,
+    gen_opt: Optimizer,
+    dis_opt: Optimizer,
+    rng: ChaCha8Rng,
+    order: Vec<usize>,
+    cursor: usize,
+    full_batch: Option<(Batch, Tensor)>,
+}
+
+impl Trainer {
+    pub fn new(clips: &[Motion], config: &TrainConfig) -> Result<Self> {
+        config.validate()?;
+        let data = Dataset::new(clips, &config.features)?;
+        let vae = Vae::new(&config.model, data.dim, config.seed)?;
+        let denorm = Denorm::new(&data.stats)?;
+        let gen_opt = Optimizer::new(
+            vae.params.with_prefix(&GENERATOR),
+            config.optimizer,
+            config.max_grad_norm,
+        );
+        let dis_opt = Optimizer::new(
+            vae.params.with_prefix(&DISCRIMINATORS),
+            config.optimizer,
+            config.max_grad_norm,
+        );
+        let full_batch = if data.len() <= config.batch_size {
+            let all: Vec<usize> = (0..data.len()).collect();
+            let b = data.batch(&all)?;
+            let rot = loss::rotation_matrices(&b.raw)?;
+            Some((b, rot))
+        } else {
+            None
+        };
+        Ok(Trainer {
+            order: (0..data.len()).collect(),
+            cursor: usize::MAX,
+            rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x7261_696e),
+            config: config.clone(),
+            vae,
+            data,
+            denorm,
+            gen_opt,
+            dis_opt,
+            full_batch,
+        })
+    }
+
+    fn next_batch(&mut self) -> Result<(Batch, Tensor)> {
+        if let Some((b, r)) = &self.full_batch {
+            return Ok((
+                Batch {
+                    x: b.x.clone(),
+                    raw: b.raw.clone(),
+                    mask: b.mask.clone(),
+                    lengths: b.lengths.clone(),
+                },
+                r.clone(),
+            ));
+        }
+        let bs = self.config.batch_size;
+        if self.cursor.saturating_add(bs) > self.order.len() {
+            self.order.shuffle(&mut self.rng);
+            self.cursor = 0;
+        }
+        let idx = self.order[self.cursor..self.cursor + bs].to_vec();
+        self.cursor += bs;
+        let b = self.data.batch(&idx)?;
+        let r = loss::rotation_matrices(&b.raw)?;
+        Ok((b, r))
+    }
+
+    pub fn lr(&self) -> f64 {
+        self.gen_opt.lr()
+    }
+
+    /// One generator step (and one discriminator step when adversarial).
+    pub fn step(&mut self) -> Result<Losses> {
+        let (batch, target_rot) = self.next_batch()?;
+        let vae = &self.vae;
+        let w = self.config.weights;
+        let (mu, logvar) = vae.encoder.forward(&batch.x, &batch.mask)?;
+        let (b, latent) = mu.dims2()?;
+        let eps: Vec<f32> = (0..b * latent)
+            .map(|_| StandardNormal.sample(&mut self.rng))
+            .collect();
+        let eps = Tensor::from_vec(eps, (b, latent), &Device::Cpu)?;
+        let z = (&mu + (logvar.clone() * 0.5)?.exp()?.mul(&eps)?)?;
+        let frames = batch.x.dim(1)?;
+        let xhat = vae.decoder.forward(&z, frames)?;
+        let raw_hat = self.denorm.apply(&xhat)?;
+        let (root, rot) = loss::reconstruction(&raw_hat, &batch.raw, &target_rot, &batch.mask)?;
+        let smooth = loss::smoothness(&raw_hat, &batch.mask)?;
+        let kl = loss::kl(&mu, &logvar)?;
+        let mut total = ((&root + &rot)? + ((smooth.clone() * w.smooth)? + (kl.clone() * w.kl)?)?)?;
+        let mut adv = 0.0;
+        if self.config.adversarial {
+            let g = (loss::hinge_generator(&vae.frame_disc.forward(&xhat)?, Some(&batch.mask))?
+                + loss::hinge_generator(&vae.seq_disc.forward(&xhat, &batch.mask)?, None)?)?;
+            adv = g.to_scalar::<f32>()?;
+            total = (total + (g * w.adversarial)?)?;
+        }
+        let grads = total.backward()?;
+        self.gen_opt.step(&grads)?;
+        let mut disc = 0.0;
+        if self.config.adversarial {
+            let fake = xhat.detach();
+            let m = &batch.mask;
+            let d = (loss::hinge_discriminator(
+                &vae.frame_disc.forward(&batch.x)?,
+                &vae.frame_disc.forward(&fake)?,
+                Some(m),
+            )? + loss::hinge_discriminator(
+                &vae.seq_disc.forward(&batch.x, m)?,
+                &vae.seq_disc.forward(&fake, m)?,
+                None,
+            )?)?;
+            disc = d.to_scalar::<f32>()?;
+            self.dis_opt.step(&d.backward()?)?;
+        }
+        let losses = Losses {
+            root: root.to_scalar()?,
+            rotation: rot.to_scalar()?,
+            smooth: smooth.to_scalar()?,
+            kl: kl.to_scalar()?,
+            adversarial: adv,
+            discriminator: disc,
+            total: total.to_scalar()?,
+        };
+        if !losses.total.is_finite() {
+            return Err(VaeError::Data(format!(
+                "training diverged (loss {}); try a smaller learning rate",
+                losses.total
+            )));
+        }
+        Ok(losses)
+    }
+
+    /// Train for the configured iterations, then encode the training set and
+    /// cluster it for sampling near samples.
+    pub fn run(mut self, mut progress: impl FnMut(&Progress)) -> Result<TrainedVae> {
+        let _span = tracing::info_span!("vae_train", clips = self.data.len()).entered();
+        let start = Instant::now();
+        let mut last = Losses::default();
+        for it in 0..self.config.iterations {
+            let lr = self.lr();
+            last = self.step()?;
+            progress(&Progress {
+                iteration: it + 1,
+                iterations: self.config.iterations,
+                lr,
+                losses: &last,
+            });
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let all: Vec<usize> = (0..self.data.len()).collect();
+        let batch = self.data.batch(&all)?;
+        let (mu, logvar) = self.vae.encoder.forward(&batch.x, &batch.mask)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed ^ 0x6e65_6172);
+        let latents = LatentStats::fit(
+            mu.to_vec2()?,
+            logvar.to_vec2()?,
+            &self.config.near,
+            &mut rng,
+        )?;
+        let meta = ModelMeta {
+            format: crate::trained::FORMAT,
+            config: self.config.model.clone(),
+            features: self.config.features,
+            stats: self.data.stats.clone(),
+            skeleton: (*self.data.skeleton).clone(),
+            lengths: self.data.lengths(),
+            latents,
+            training: TrainingSummary {
+                clips: self.data.len(),
+                iterations: self.config.iterations,
+                adversarial: self.config.adversarial,
+                optimizer: self.config.optimizer,
+                weights: self.config.weights,
+                seed: self.config.seed,
+                final_losses: last,
+                seconds,
+            },
+        };
+        TrainedVae::from_parts(self.vae, meta)
+    }
+}
+
+/// Train a model on `clips` (one action class).
+pub fn train(
+    clips: &[Motion],
+    config: &TrainConfig,
+    progress: impl FnMut(&Progress),
+) -> Result<TrainedVae> {
+    Trainer::new(clips, config)?.run(progress)
+}

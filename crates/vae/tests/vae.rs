@@ -1,0 +1,239 @@
+//! End-to-end checks on tiny models and short synthetic clips (fast), plus the
+//! feature conversion on a real HDM05 clip.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use candle_core::{DType, Device, Tensor};
+use motion::glam::{DQuat, DVec3};
+use motion::{Joint, Motion, Skeleton};
+use vae::features::{FeatureConfig, clip_frames, frame_dim, frames_to_motion};
+use vae::model::Vae;
+use vae::{Prior, TrainConfig, TrainedVae, VaeConfig};
+
+fn skeleton() -> Arc<Skeleton> {
+    let joint = |name: &str, parent, offset| Joint {
+        name: name.into(),
+        parent,
+        offset,
+        channels: vec![],
+        end_site: None,
+        limits: None,
+    };
+    Arc::new(
+        Skeleton::new(
+            vec![
+                joint("hips", None, DVec3::ZERO),
+                joint("thigh", Some(0), DVec3::new(0.1, -0.1, 0.0)),
+                joint("shin", Some(1), DVec3::new(0.0, -0.45, 0.0)),
+            ],
+            1.0,
+        )
+        .unwrap(),
+    )
+}
+
+/// A kick-like clip: the thigh swings forward and back, the root walks a little.
+fn clip(frames: usize, amplitude: f64, phase: f64) -> Motion {
+    let s = skeleton();
+    let mut root = Vec::new();
+    let mut rot = Vec::new();
+    for t in 0..frames {
+        let u = t as f64 / frames as f64;
+        let swing = amplitude * (std::f64::consts::TAU * u + phase).sin();
+        root.push(DVec3::new(0.2 * u, 0.9 + 0.02 * swing, 0.5 * u));
+        rot.push(DQuat::from_rotation_y(0.3 * u));
+        rot.push(DQuat::from_rotation_x(-swing));
+        rot.push(DQuat::from_rotation_x(0.5 * swing.abs()));
+    }
+    Motion::new(s, 30.0, root, rot).unwrap()
+}
+
+fn tiny_config(iterations: u64) -> TrainConfig {
+    TrainConfig {
+        model: VaeConfig::tiny(),
+        iterations,
+        seed: 11,
+        ..TrainConfig::default()
+    }
+}
+
+#[test]
+fn network_shapes() {
+    let cfg = VaeConfig::tiny();
+    let f = frame_dim(3);
+    let vae = Vae::new(&cfg, f, 0).unwrap();
+    let x = Tensor::zeros((4, 7, f), DType::F32, &Device::Cpu).unwrap();
+    let mask = Tensor::ones((4, 7), DType::F32, &Device::Cpu).unwrap();
+    let (mu, lv) = vae.encoder.forward(&x, &mask).unwrap();
+    assert_eq!(mu.dims(), &[4, cfg.latent]);
+    assert_eq!(lv.dims(), &[4, cfg.latent]);
+    assert_eq!(vae.decoder.forward(&mu, 9).unwrap().dims(), &[4, 9, f]);
+    assert_eq!(vae.frame_disc.forward(&x).unwrap().dims(), &[4, 7]);
+    assert_eq!(vae.seq_disc.forward(&x, &mask).unwrap().dims(), &[4]);
+}
+
+#[test]
+fn padding_does_not_change_the_encoding() {
+    let vae = Vae::new(&VaeConfig::tiny(), frame_dim(3), 2).unwrap();
+    let f = frame_dim(3);
+    let data: Vec<f32> = (0..5 * f)
+        .map(|i| ((i * 37) % 11) as f32 / 5.0 - 1.0)
+        .collect();
+    let x = Tensor::from_vec(data.clone(), (1, 5, f), &Device::Cpu).unwrap();
+    let ones = Tensor::ones((1, 5), DType::F32, &Device::Cpu).unwrap();
+    let mut padded = data;
+    padded.extend(vec![9.0f32; 3 * f]);
+    let xp = Tensor::from_vec(padded, (1, 8, f), &Device::Cpu).unwrap();
+    let mask =
+        Tensor::from_vec(vec![1f32, 1., 1., 1., 1., 0., 0., 0.], (1, 8), &Device::Cpu).unwrap();
+    let a = vae
+        .encoder
+        .forward(&x, &ones)
+        .unwrap()
+        .0
+        .to_vec2::<f32>()
+        .unwrap();
+    let b = vae
+        .encoder
+        .forward(&xp, &mask)
+        .unwrap()
+        .0
+        .to_vec2::<f32>()
+        .unwrap();
+    for (p, q) in a[0].iter().zip(&b[0]) {
+        assert!((p - q).abs() < 1e-5, "{a:?} vs {b:?}");
+    }
+}
+
+#[test]
+fn a_tiny_vae_overfits_three_clips() {
+    let clips = vec![clip(24, 0.8, 0.0), clip(30, 0.5, 1.0), clip(20, 1.0, 2.0)];
+    let mut cfg = tiny_config(1);
+    cfg.adversarial = false;
+    cfg.optimizer = vae::OptimizerConfig::Adam { lr: 3e-3 };
+    let before = vae::train(&clips, &cfg, |_| {})
+        .unwrap()
+        .reconstruction_error(&clips)
+        .unwrap();
+    cfg.iterations = 400;
+    let mut first = None;
+    let mut last = 0.0;
+    let model = vae::train(&clips, &cfg, |p| {
+        let l = p.losses.root + p.losses.rotation;
+        first.get_or_insert(l);
+        last = l;
+    })
+    .unwrap();
+    let after = model.reconstruction_error(&clips).unwrap();
+    let first = first.unwrap();
+    assert!(last * 10.0 < first, "training loss {first} -> {last}");
+    assert!(
+        after.mean_joint_angle_rad * 2.5 < before.mean_joint_angle_rad,
+        "{before:?} -> {after:?}"
+    );
+    assert!(
+        after.root_rmse_m * 2.5 < before.root_rmse_m,
+        "{before:?} -> {after:?}"
+    );
+    // Reconstructions have the clips' own lengths and the training skeleton.
+    let recon = model.reconstruct(&clips).unwrap();
+    assert_eq!(
+        recon.iter().map(Motion::frames).collect::<Vec<_>>(),
+        vec![24, 30, 20]
+    );
+}
+
+#[test]
+fn adversarial_training_runs_and_reports_its_terms() {
+    let clips = vec![clip(16, 0.8, 0.0), clip(12, 0.5, 1.0)];
+    let mut seen = vec![];
+    vae::train(&clips, &tiny_config(5), |p| seen.push(*p.losses)).unwrap();
+    assert_eq!(seen.len(), 5);
+    assert!(
+        seen.iter()
+            .all(|l| l.discriminator > 0.0 && l.total.is_finite())
+    );
+    let mut cfg = tiny_config(2);
+    cfg.adversarial = false;
+    vae::train(&clips, &cfg, |p| assert_eq!(p.losses.discriminator, 0.0)).unwrap();
+}
+
+#[test]
+fn training_is_deterministic_and_save_load_keeps_samples() {
+    let clips = vec![clip(16, 0.8, 0.0), clip(12, 0.5, 1.0), clip(14, 0.3, 2.0)];
+    let a = vae::train(&clips, &tiny_config(8), |_| {}).unwrap();
+    let b = vae::train(&clips, &tiny_config(8), |_| {}).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    a.save(dir.path()).unwrap();
+    let loaded = TrainedVae::load(dir.path()).unwrap();
+    for prior in [Prior::Near, Prior::Normal] {
+        let s1 = a.sample(4, prior, 9).unwrap();
+        let s2 = loaded.sample(4, prior, 9).unwrap();
+        let s3 = b.sample(4, prior, 9).unwrap();
+        for ((x, y), z) in s1.iter().zip(&s2).zip(&s3) {
+            assert_eq!(x.motion, y.motion);
+            assert_eq!(x.motion, z.motion);
+            assert_eq!(x.z, y.z);
+            assert!([16, 12, 14].contains(&x.motion.frames()));
+        }
+        let other = a.sample(4, prior, 10).unwrap();
+        assert_ne!(other[0].z, s1[0].z);
+    }
+    assert_eq!(a.meta(), loaded.meta());
+    // A damaged model directory is an error, not a panic.
+    std::fs::write(dir.path().join("weights.safetensors"), b"junk").unwrap();
+    assert!(TrainedVae::load(dir.path()).is_err());
+}
+
+#[test]
+fn near_samples_are_closer_to_training_posteriors_than_prior_samples() {
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| clip(12 + i, 0.3 + 0.1 * i as f64, i as f64))
+        .collect();
+    let model = vae::train(&clips, &tiny_config(30), |_| {}).unwrap();
+    let mus = &model.meta().latents.mu;
+    let nearest = |z: &[f32]| {
+        mus.iter()
+            .map(|m| {
+                m.iter()
+                    .zip(z)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f32>()
+                    .sqrt()
+            })
+            .fold(f32::INFINITY, f32::min)
+    };
+    let mean = |prior| {
+        let s = model.sample(100, prior, 1).unwrap();
+        s.iter().map(|s| nearest(&s.z)).sum::<f32>() / s.len() as f32
+    };
+    let (near, normal) = (mean(Prior::Near), mean(Prior::Normal));
+    assert!(near < normal, "near {near} vs normal {normal}");
+}
+
+#[test]
+fn real_clip_features_round_trip_to_the_same_poses() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/hdm05");
+    let options = motion::LoadOptions {
+        skeleton: Some(dir.join("HDM_bd.asf")),
+        ..Default::default()
+    };
+    let m = motion::load(dir.join("HDM_bd_kickLFront1Reps_001_120.amc"), &options).unwrap();
+    let config = FeatureConfig::default();
+    let frames = clip_frames(&m, &config).unwrap();
+    let back = frames_to_motion(m.skeleton(), config.fps, &frames).unwrap();
+    let resampled = motion::resample::resample(&m, 30.0).unwrap();
+    assert_eq!(back.frames(), resampled.frames());
+    // The same poses, turned by the heading normalisation about the vertical.
+    let turn = DQuat::from_rotation_y(-vae::features::heading(resampled.rotation(0, 0)));
+    for t in (0..back.frames()).step_by(7) {
+        let a = resampled.world_positions(t);
+        let b = back.world_positions(t);
+        for j in 1..a.len() {
+            let d = (turn * (a[j] - a[0]) - (b[j] - b[0])).length();
+            assert!(d < 1e-4, "frame {t} joint {j}: {d}");
+        }
+        assert!((a[0].y - b[0].y).abs() < 1e-4);
+    }
+}
