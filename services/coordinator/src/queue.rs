@@ -58,7 +58,6 @@ pub async fn claim(
     kinds: &[String],
     lease: Duration,
 ) -> Result<Option<ClaimedRow>, sqlx::Error> {
-    touch_worker(db, worker_id).await?;
     sqlx::query_as(
         "WITH next AS (
              SELECT j.id FROM jobs j

@@ -49,7 +49,7 @@ async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
         ("MOTIONAUG_MAX_UPLOAD_BYTES", "1048576"),
         ("MOTIONAUG_MAX_FILES", "5"),
         ("MOTIONAUG_MAX_FRAMES", "500"),
-        ("MOTIONAUG_LEASE_MS", "2000"),
+        ("MOTIONAUG_LEASE_MS", "10000"),
         ("MOTIONAUG_RETRY_BASE_MS", "10"),
         ("MOTIONAUG_REAP_INTERVAL_MS", "50"),
         ("MOTIONAUG_POLL_INTERVAL_MS", "50"),
@@ -508,6 +508,73 @@ async fn limits_on_body_size_file_count_and_frames() {
     app.cleanup().await;
 }
 
+fn example(name: &str) -> Vec<u8> {
+    std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../examples/data")
+            .join(name),
+    )
+    .unwrap()
+}
+
+#[tokio::test]
+async fn amc_clips_pair_with_the_asf_of_their_upload() {
+    let app = spawn_app(&[]).await;
+    let asf = example("HDM_bd.asf");
+    let kick = example("HDM_bd_kickLFront1Reps_001_120.amc");
+    // Two skeletons: the AMC takes the one whose name prefixes its own.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("HDM_xx.asf", asf.clone()),
+                ("HDM_bd.asf", asf.clone()),
+                ("HDM_bd_kickLFront1Reps_001_120.amc", kick.clone()),
+            ],
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["clips"].as_array().unwrap().len(), 1);
+    assert_eq!(body["clips"][0]["name"], "HDM_bd_kickLFront1Reps_001_120");
+    assert_eq!(body["clips"][0]["fps"], 120.0);
+    assert_eq!(body["clips"][0]["joints"], 31);
+    let skeleton: String = sqlx::query_scalar("SELECT skeleton_name FROM clips")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(skeleton, "HDM_bd.asf");
+    // Several skeletons and none fits: refused, naming the AMC.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("a.asf", asf.clone()),
+                ("b.asf", asf.clone()),
+                ("kick.amc", kick.clone()),
+            ],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "kick.amc");
+    // A broken ASF is named with its line.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("bad.asf", b":bonedata\n begin\n   id x\n".to_vec()),
+                ("k.amc", kick),
+            ],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "bad.asf");
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
 #[tokio::test]
 async fn tenants_never_see_each_other() {
     let app = spawn_app(&[]).await;
@@ -805,7 +872,7 @@ async fn augment_poll_and_download_through_the_worker_api() {
 
 #[tokio::test]
 async fn expired_leases_are_reclaimed_and_old_leases_cannot_report() {
-    let app = spawn_app(&[("MOTIONAUG_LEASE_MS", "300")]).await;
+    let app = spawn_app(&[("MOTIONAUG_LEASE_MS", "1000")]).await;
     let (dataset, _) = upload_one(&app).await;
     let aug: Value = app
         .augment(&dataset, &noise_recipe())
@@ -829,7 +896,7 @@ async fn expired_leases_are_reclaimed_and_old_leases_cannot_report() {
     assert_eq!(r.status(), StatusCode::NO_CONTENT);
     // The first worker goes silent; the lease expires and the job is claimable again.
     let mut second = None;
-    for _ in 0..100 {
+    for _ in 0..200 {
         tokio::time::sleep(Duration::from_millis(50)).await;
         if let Some(job) = app.claim().await {
             second = Some(job);
@@ -970,13 +1037,21 @@ async fn cancellation_reaches_running_jobs_and_events_stream() {
             .unwrap()
             .starts_with("text/event-stream")
     );
+    // The first event (sent as soon as the stream is read) is the queued state.
+    let mut stream = events;
+    let first = stream.chunk().await.unwrap().expect("a first event");
+    let first = String::from_utf8_lossy(&first).into_owned();
+    assert!(first.contains("\"status\":\"queued\""), "{first}");
+    let seen = std::sync::Arc::new(std::sync::Mutex::new(first));
+    let seen_by_reader = seen.clone();
     let reader = tokio::spawn(async move {
-        let mut text = String::new();
-        let mut stream = events;
         while let Ok(Some(chunk)) = stream.chunk().await {
-            text.push_str(&String::from_utf8_lossy(&chunk));
+            seen_by_reader
+                .lock()
+                .unwrap()
+                .push_str(&String::from_utf8_lossy(&chunk));
         }
-        text
+        seen_by_reader.lock().unwrap().clone()
     });
 
     let job = app.claim().await.unwrap();
@@ -994,7 +1069,13 @@ async fn cancellation_reaches_running_jobs_and_events_stream() {
         .await
         .unwrap();
     assert_eq!(reply["cancelled"], false);
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // The stream reports the running job before it is cancelled.
+    for _ in 0..400 {
+        if seen.lock().unwrap().contains("\"status\":\"running\"") {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
     let r = app
         .http
         .delete(app.url(&format!("/v1/augmentations/{aug}")))

@@ -351,15 +351,15 @@ impl Cluster {
         Ok(r.json().await?)
     }
 
-    /// Waits until some job is running with at least one output stored; returns
-    /// (job id, worker id).
+    /// Waits until some job is running with at least one but less than half of its
+    /// outputs stored (7 outputs of 2 files each per clip); returns (job id, worker id).
     async fn job_in_progress(&self) -> anyhow::Result<(Uuid, String)> {
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             let row: Option<(Uuid, String)> = sqlx::query_as(
                 "SELECT j.id, j.worker_id FROM jobs j
                  WHERE j.state = 'running' AND j.checkpoint IS NOT NULL
-                   AND (SELECT count(*) FROM artifacts a WHERE a.job_id = j.id) > 0
+                   AND (SELECT count(*) FROM artifacts a WHERE a.job_id = j.id) BETWEEN 1 AND 6
                  ORDER BY j.seq LIMIT 1",
             )
             .fetch_optional(&self.db)

@@ -166,17 +166,12 @@ pub async fn load_status(
     tenant_id: Uuid,
     id: Uuid,
 ) -> Result<Option<AugmentationStatus>, ApiError> {
-    let row: Option<(Uuid, Option<DateTime<Utc>>, DateTime<Utc>)> = sqlx::query_as(
-        "SELECT dataset_id, cancelled_at, created_at FROM augmentations WHERE id = $1 AND tenant_id = $2",
-    )
-    .bind(id)
-    .bind(tenant_id)
-    .fetch_optional(&state.db)
-    .await?;
-    let Some((dataset_id, cancelled_at, created_at)) = row else {
-        return Ok(None);
-    };
-    let (total, queued, running, succeeded, failed, cancelled, done): (
+    // One statement, so the cancellation mark and the job counts come from the
+    // same snapshot (a cancel between two reads would look like a failure).
+    type Row = (
+        Uuid,
+        Option<DateTime<Utc>>,
+        DateTime<Utc>,
         i64,
         i64,
         i64,
@@ -184,19 +179,41 @@ pub async fn load_status(
         i64,
         i64,
         f64,
-    ) = sqlx::query_as(
-        "SELECT count(*),
-                count(*) FILTER (WHERE state = 'queued'),
-                count(*) FILTER (WHERE state = 'running'),
-                count(*) FILTER (WHERE state = 'succeeded'),
-                count(*) FILTER (WHERE state = 'failed'),
-                count(*) FILTER (WHERE state = 'cancelled'),
-                COALESCE(sum(CASE WHEN state = 'succeeded' THEN 1 ELSE progress END), 0)::float8
-         FROM jobs WHERE augmentation_id = $1",
+    );
+    let row: Option<Row> = sqlx::query_as(
+        "SELECT a.dataset_id, a.cancelled_at, a.created_at,
+                c.total, c.queued, c.running, c.succeeded, c.failed, c.cancelled, c.done
+         FROM augmentations a
+         CROSS JOIN LATERAL (
+             SELECT count(*) AS total,
+                    count(*) FILTER (WHERE state = 'queued') AS queued,
+                    count(*) FILTER (WHERE state = 'running') AS running,
+                    count(*) FILTER (WHERE state = 'succeeded') AS succeeded,
+                    count(*) FILTER (WHERE state = 'failed') AS failed,
+                    count(*) FILTER (WHERE state = 'cancelled') AS cancelled,
+                    COALESCE(sum(CASE WHEN state = 'succeeded' THEN 1 ELSE progress END), 0)::float8 AS done
+             FROM jobs WHERE augmentation_id = a.id) c
+         WHERE a.id = $1 AND a.tenant_id = $2",
     )
     .bind(id)
-    .fetch_one(&state.db)
+    .bind(tenant_id)
+    .fetch_optional(&state.db)
     .await?;
+    let Some((
+        dataset_id,
+        cancelled_at,
+        created_at,
+        total,
+        queued,
+        running,
+        succeeded,
+        failed,
+        cancelled,
+        done,
+    )) = row
+    else {
+        return Ok(None);
+    };
     let errors: Vec<(Uuid, Option<String>, String)> = sqlx::query_as(
         "SELECT id, input->>'clip_name', error FROM jobs
          WHERE augmentation_id = $1 AND state = 'failed' AND error IS NOT NULL ORDER BY seq",
@@ -209,7 +226,7 @@ pub async fn load_status(
     } else if succeeded == total {
         "succeeded"
     } else if queued + running == 0 {
-        "failed"
+        if failed > 0 { "failed" } else { "cancelled" }
     } else if running > 0 || succeeded > 0 || failed > 0 {
         "running"
     } else {

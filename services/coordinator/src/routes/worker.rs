@@ -79,6 +79,7 @@ pub async fn claim(
     let wait = Duration::from_millis(request.wait_ms).min(queue_config.max_claim_wait);
     let deadline = Instant::now() + wait;
     let mut events = state.events.subscribe();
+    queue::touch_worker(&state.db, &request.worker_id).await?;
     loop {
         if let Some(row) = queue::claim(
             &state.db,
