@@ -575,6 +575,23 @@ async fn amc_clips_pair_with_the_asf_of_their_upload() {
     app.cleanup().await;
 }
 
+/// The upload limit, not the 4 MiB limit of JSON bodies, applies to uploads.
+#[tokio::test]
+async fn uploads_larger_than_json_bodies_are_accepted() {
+    let app = spawn_app(&[
+        ("MOTIONAUG_MAX_UPLOAD_BYTES", "16777216"),
+        ("MOTIONAUG_MAX_FRAMES", "1000000"),
+    ])
+    .await;
+    let big = bvh(150_000);
+    assert!(big.len() > 5 << 20, "{} bytes", big.len());
+    let r = app.upload(&app.key, &[("long.bvh", big)]).await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["clips"][0]["frames"], 150_000);
+    app.cleanup().await;
+}
+
 #[tokio::test]
 async fn tenants_never_see_each_other() {
     let app = spawn_app(&[]).await;
