@@ -52,6 +52,7 @@ fn main() {
         ("redis_flushed_and_restarted", || {
             block_on(redis_flushed_and_restarted())
         }),
+        ("two_coordinators", || block_on(two_coordinators())),
     ];
     let started = Instant::now();
     let (mut passed, mut failed, mut filtered) = (0, 0, 0);
@@ -141,6 +142,8 @@ struct Cluster {
     redis: Option<Child>,
     coordinator: Option<Child>,
     coordinator_starts: usize,
+    /// Further coordinators (ports and processes) sharing the database and Redis.
+    extra_coordinators: Vec<(u16, Child)>,
     workers: BTreeMap<String, Child>,
     http: reqwest::Client,
     key: String,
@@ -166,6 +169,7 @@ impl Cluster {
             redis: None,
             coordinator: None,
             coordinator_starts: 0,
+            extra_coordinators: Vec::new(),
             workers: BTreeMap::new(),
             http: reqwest::Client::new(),
             key: String::new(),
@@ -260,6 +264,33 @@ impl Cluster {
         }
     }
 
+    /// Starts another coordinator on its own port; returns the port.
+    async fn start_extra_coordinator(&mut self) -> anyhow::Result<u16> {
+        let port = free_port();
+        let name = format!("coordinator-extra-{port}");
+        let child = self
+            .coordinator_command()?
+            .env("MOTIONAUG_LISTEN", format!("127.0.0.1:{port}"))
+            .stdout(self.log(&name)?)
+            .stderr(self.log(&name)?)
+            .spawn()?;
+        self.extra_coordinators.push((port, child));
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Ok(r) = self
+                .http
+                .get(format!("http://127.0.0.1:{port}/readyz"))
+                .send()
+                .await
+                && r.status().is_success()
+            {
+                return Ok(port);
+            }
+            ensure!(Instant::now() < deadline, "extra coordinator not ready");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
     fn create_key(&self, tenant: &str) -> anyhow::Result<String> {
         let out = self
             .coordinator_command()?
@@ -276,10 +307,14 @@ impl Cluster {
     }
 
     fn start_worker(&mut self, id: &str, delay_ms: u64) -> anyhow::Result<()> {
+        self.start_worker_on(id, delay_ms, self.port)
+    }
+
+    fn start_worker_on(&mut self, id: &str, delay_ms: u64, port: u16) -> anyhow::Result<()> {
         let child = Command::new(env!("CARGO_BIN_EXE_motionaug-worker"))
             .env(
                 "MOTIONAUG_COORDINATOR_URL",
-                format!("http://127.0.0.1:{}", self.port),
+                format!("http://127.0.0.1:{port}"),
             )
             .env("MOTIONAUG_WORKER_TOKEN", TOKEN)
             .env("MOTIONAUG_WORKER_ID", id)
@@ -473,6 +508,9 @@ impl Cluster {
         if let Some(mut c) = self.coordinator.take() {
             kill(&mut c);
         }
+        for (_, mut c) in std::mem::take(&mut self.extra_coordinators) {
+            kill(&mut c);
+        }
         self.stop_redis();
         self.db.close().await;
         if let Ok(mut admin) = PgConnection::connect(ADMIN_URL).await {
@@ -497,6 +535,9 @@ impl Drop for Cluster {
             kill(w);
         }
         if let Some(c) = self.coordinator.as_mut() {
+            kill(c);
+        }
+        for (_, c) in self.extra_coordinators.iter_mut() {
             kill(c);
         }
         if let Some(r) = self.redis.as_mut() {
@@ -696,6 +737,46 @@ async fn redis_flushed_and_restarted() -> anyhow::Result<()> {
                 .context("no SSE data")?;
             let last: Value = serde_json::from_str(last)?;
             ensure!(last["status"] == "succeeded", "last SSE event: {last}");
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// Two coordinators share the database and Redis: the augmentation is started on
+/// one, its worker talks to the other (woken through Redis), and an SSE client on
+/// the second sees it finish.
+async fn two_coordinators() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            let other = c.start_extra_coordinator().await?;
+            c.start_worker_on("w-other", 0, other)?;
+            // Let the worker's long poll start on the other coordinator.
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            let aug = c.upload_and_augment().await?;
+            let events = c
+                .http
+                .get(format!(
+                    "http://127.0.0.1:{other}/v1/augmentations/{aug}/events"
+                ))
+                .bearer_auth(&c.key)
+                .send()
+                .await?;
+            ensure!(events.status().is_success(), "events: {}", events.status());
+            c.verify(&aug).await?;
+            let text = tokio::time::timeout(Duration::from_secs(20), events.text()).await??;
+            ensure!(
+                text.contains("\"status\":\"succeeded\""),
+                "SSE on the other coordinator: {text}"
+            );
+            let workers: Vec<String> = sqlx::query_scalar(
+                "SELECT DISTINCT worker_id FROM jobs WHERE worker_id IS NOT NULL",
+            )
+            .fetch_all(&c.db)
+            .await?;
+            ensure!(workers == ["w-other"], "jobs ran on {workers:?}");
             Ok(())
         }
         .await;
