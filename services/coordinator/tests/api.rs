@@ -1275,3 +1275,50 @@ async fn load_test() {
         Err(_) => panic!("app still shared"),
     }
 }
+
+/// A job runs only when the jobs it depends on have succeeded (the job graph
+/// that correction jobs will use; built here by hand in the database).
+#[tokio::test]
+async fn dependent_jobs_wait_for_their_inputs() {
+    let app = spawn_app(&[]).await;
+    let r = app
+        .upload(&app.key, &[("walk.bvh", bvh(30)), ("jump.bvh", bvh(20))])
+        .await;
+    let dataset: Value = r.json().await.unwrap();
+    let aug: Value = app
+        .augment(dataset["id"].as_str().unwrap(), &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let jobs: Vec<Uuid> = sqlx::query_scalar("SELECT id FROM jobs ORDER BY seq")
+        .fetch_all(&app.db)
+        .await
+        .unwrap();
+    // The first job (walk) now waits for the second (jump).
+    sqlx::query("INSERT INTO job_dependencies (job_id, depends_on) VALUES ($1, $2)")
+        .bind(jobs[0])
+        .bind(jobs[1])
+        .execute(&app.db)
+        .await
+        .unwrap();
+    let first = app.claim().await.unwrap();
+    assert_eq!(first["id"], jobs[1].to_string());
+    assert!(app.claim().await.is_none(), "the dependent job must wait");
+    let epoch = first["epoch"].as_i64().unwrap();
+    let body = json!({"epoch": epoch, "output": empty_output()});
+    assert_eq!(
+        app.report(&first, "complete", body).await,
+        StatusCode::NO_CONTENT
+    );
+    let second = app
+        .claim()
+        .await
+        .expect("runnable once its input succeeded");
+    assert_eq!(second["id"], jobs[0].to_string());
+    assert_eq!(
+        app.status(aug["id"].as_str().unwrap()).await["jobs"]["running"],
+        1
+    );
+    app.cleanup().await;
+}
