@@ -283,3 +283,17 @@ mod tests {
         fs::remove_dir_all(&dir).unwrap();
     }
 }
+
+#[cfg(test)]
+mod float_tests {
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn json_floats_round_trip_exactly(x in proptest::num::f64::NORMAL) {
+            let s = serde_json::to_string(&x).unwrap();
+            let back: f64 = serde_json::from_str(&s).unwrap();
+            prop_assert_eq!(back.to_bits(), x.to_bits());
+        }
+    }
+}
