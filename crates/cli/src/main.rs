@@ -33,6 +33,8 @@ enum Command {
     Augment(commands::augment::Args),
     /// Physical plausibility metrics of a clip (foot skating, penetration, ...).
     Metrics(commands::metrics::Args),
+    /// Two-person interactions: retarget to another body size, generate variations.
+    Interaction(commands::interaction::Args),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +51,7 @@ fn main() -> ExitCode {
         Command::Convert(args) => commands::convert::run(args),
         Command::Augment(args) => commands::augment::run(args),
         Command::Metrics(args) => commands::metrics::run(args),
+        Command::Interaction(args) => commands::interaction::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,4 +3,5 @@
 pub mod augment;
 pub mod convert;
 pub mod inspect;
+pub mod interaction;
 pub mod metrics;
