@@ -73,12 +73,12 @@ impl Default for SolverOptions {
             laplacian: 1.0,
             close_boost: 4.0,
             close_radius_m: 0.3,
-            rod: 30.0,
+            rod: 100.0,
             key_pair: 30.0,
-            foot: 30.0,
+            foot: 100.0,
             temporal: 0.5,
             anchor: 0.05,
-            iterations: 40,
+            iterations: 120,
             tolerance_m: 1e-5,
         }
     }
