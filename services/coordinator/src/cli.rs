@@ -66,7 +66,7 @@ pub fn main() -> anyhow::Result<()> {
             Command::CreateKey { tenant } => {
                 let url = std::env::var("DATABASE_URL")
                     .map_err(|_| anyhow::anyhow!("DATABASE_URL is not set"))?;
-                let db = connect_and_migrate(&url).await?;
+                let db = connect_and_migrate(&url, 2).await?;
                 let key = auth::create_key(&db, &tenant).await?;
                 println!("{key}");
                 Ok(())

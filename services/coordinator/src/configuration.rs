@@ -16,6 +16,8 @@ pub struct Config {
     pub redis_url: Option<String>,
     /// `MOTIONAUG_REDIS_PREFIX`: prefix of the pub/sub channel names (default `motionaug`).
     pub redis_prefix: String,
+    /// `MOTIONAUG_DB_POOL_SIZE`: Postgres connections of this process (default 20).
+    pub db_pool_size: u32,
     /// `MOTIONAUG_LISTEN`: address to listen on (default `127.0.0.1:8080`).
     pub listen: String,
     /// `MOTIONAUG_WORKER_TOKEN`: shared secret of the internal worker API.
@@ -139,8 +141,13 @@ impl Config {
                 bail!("{k} must be at least 10");
             }
         }
+        let db_pool_size = number("MOTIONAUG_DB_POOL_SIZE", 20)?;
+        if !(2..=1000).contains(&db_pool_size) {
+            bail!("MOTIONAUG_DB_POOL_SIZE must be between 2 and 1000");
+        }
         Ok(Config {
             database_url: required("DATABASE_URL")?,
+            db_pool_size: db_pool_size as u32,
             redis_url: get("REDIS_URL").filter(|v| !v.is_empty()),
             redis_prefix: get("MOTIONAUG_REDIS_PREFIX")
                 .filter(|v| !v.is_empty())

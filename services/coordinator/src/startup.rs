@@ -30,11 +30,11 @@ pub struct AppState {
 
 /// Connects to Postgres, waiting up to a minute for it to come up (containers
 /// start in any order), and applies the migrations.
-pub async fn connect_and_migrate(database_url: &str) -> anyhow::Result<PgPool> {
+pub async fn connect_and_migrate(database_url: &str, pool_size: u32) -> anyhow::Result<PgPool> {
     let deadline = Instant::now() + Duration::from_secs(60);
     let db = loop {
         match PgPoolOptions::new()
-            .max_connections(20)
+            .max_connections(pool_size)
             .acquire_timeout(Duration::from_secs(5))
             .connect(database_url)
             .await
@@ -61,7 +61,7 @@ pub struct Application {
 
 impl Application {
     pub async fn build(config: Config) -> anyhow::Result<Self> {
-        let db = connect_and_migrate(&config.database_url).await?;
+        let db = connect_and_migrate(&config.database_url, config.db_pool_size).await?;
         let metrics = Arc::new(Metrics::new());
         let events = Events::new(config.redis_url.as_deref(), &config.redis_prefix, &metrics)?;
         let listener = TcpListener::bind(&config.listen)

@@ -54,6 +54,7 @@ async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
         ("MOTIONAUG_REAP_INTERVAL_MS", "50"),
         ("MOTIONAUG_POLL_INTERVAL_MS", "50"),
         ("MOTIONAUG_MAX_ATTEMPTS", "3"),
+        ("MOTIONAUG_DB_POOL_SIZE", "5"),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v.to_string()))
@@ -1200,7 +1201,11 @@ async fn load_test() {
     let uploads = env_or("LOAD_UPLOADS", 200);
     let polls = env_or("LOAD_POLLS", 2000);
     let concurrency = env_or("LOAD_CONCURRENCY", 16);
-    let app = spawn_app(&[("MOTIONAUG_MAX_FILES", "10")]).await;
+    let app = spawn_app(&[
+        ("MOTIONAUG_MAX_FILES", "10"),
+        ("MOTIONAUG_DB_POOL_SIZE", "20"),
+    ])
+    .await;
     let app = std::sync::Arc::new(app);
     let clip = bvh(120);
 

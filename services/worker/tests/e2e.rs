@@ -235,6 +235,7 @@ impl Cluster {
             .env("MOTIONAUG_REAP_INTERVAL_MS", "100")
             .env("MOTIONAUG_POLL_INTERVAL_MS", "200")
             .env("MOTIONAUG_RETRY_BASE_MS", "50")
+            .env("MOTIONAUG_DB_POOL_SIZE", "8")
             .env("RUST_LOG", "info");
         Ok(cmd)
     }
