@@ -28,6 +28,37 @@ struct TestApp {
     http: reqwest::Client,
     key: String,
     server: tokio::task::JoinHandle<anyhow::Result<()>>,
+    cleaned: bool,
+}
+
+/// Drops the test database from a separate thread.
+fn drop_database(name: &str) {
+    let name = name.to_string();
+    let _ = std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            if let Ok(mut admin) = PgConnection::connect(ADMIN_URL).await {
+                let sql = format!("DROP DATABASE IF EXISTS {name} WITH (FORCE)");
+                let _ = sqlx::query(sqlx::AssertSqlSafe(sql))
+                    .execute(&mut admin)
+                    .await;
+            }
+        });
+    })
+    .join();
+}
+
+/// A test that panics before `cleanup` still drops its database.
+impl Drop for TestApp {
+    fn drop(&mut self) {
+        if !self.cleaned {
+            self.server.abort();
+            drop_database(&self.db_name);
+        }
+    }
 }
 
 async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
@@ -77,6 +108,7 @@ async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
         http: reqwest::Client::new(),
         key,
         server,
+        cleaned: false,
     }
 }
 
@@ -165,18 +197,11 @@ impl TestApp {
             .unwrap()
     }
 
-    async fn cleanup(self) {
+    async fn cleanup(mut self) {
         self.server.abort();
-        let _ = self.server.await;
         self.db.close().await;
-        let mut admin = PgConnection::connect(ADMIN_URL).await.unwrap();
-        sqlx::query(sqlx::AssertSqlSafe(format!(
-            "DROP DATABASE IF EXISTS {} WITH (FORCE)",
-            self.db_name
-        )))
-        .execute(&mut admin)
-        .await
-        .unwrap();
+        drop_database(&self.db_name);
+        self.cleaned = true;
     }
 }
 
