@@ -157,6 +157,26 @@ fn main() {
                     ppo::Control::Continue
                 })
                 .unwrap();
+            if threads == 1 {
+                let mut env = FreeEnv { t: 0 };
+                let t = Instant::now();
+                let ev = trainer.evaluate(&mut env, 300).unwrap();
+                let on_eval_thread = t.elapsed().as_secs_f64() / ev.rewards.len() as f64;
+                let mut obs = vec![0.0f32; OBS];
+                let mut act = vec![0.0f32; ACT];
+                env.reset_eval(&mut obs);
+                let t = Instant::now();
+                for _ in 0..300 {
+                    trainer.act_deterministic(&obs, &mut act).unwrap();
+                    env.step(&act, &mut obs);
+                }
+                let on_caller = t.elapsed().as_secs_f64() / 300.0;
+                println!(
+                    "  deterministic evaluation: {:.1} us/step on the evaluation thread, {:.1} us/step calling act_deterministic from main",
+                    on_eval_thread * 1e6,
+                    on_caller * 1e6
+                );
+            }
             println!(
                 "  trainer, {threads} rollout thread(s), 32 envs: rollout {:9.0} samples/s; update {:9.0} sample-epochs/s ({:.1} us per sample-epoch)",
                 samples as f64 / rollout,

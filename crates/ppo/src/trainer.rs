@@ -143,6 +143,9 @@ pub struct Trainer<E: Env> {
     rng: EnvRng,
     progress: Progress,
     pool: std::sync::Arc<rayon::ThreadPool>,
+    /// One thread: batch-1 evaluation is dominated by thread hand-offs when candle's
+    /// matmuls split across the global pool, so evaluation runs here instead.
+    serial_pool: std::sync::Arc<rayon::ThreadPool>,
     /// `progress.wall_s` when this process took the job over, and since when.
     wall_base: f64,
     session_start: Instant,
@@ -193,6 +196,12 @@ impl<E: Env> Trainer<E> {
             .map_err(|e| {
                 PpoError::Config(format!("cannot start {} threads: {e}", config.threads))
             })?;
+        let serial_pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .thread_name(|_| "ppo-eval".to_string())
+            .build()
+            .map(std::sync::Arc::new)
+            .map_err(|e| PpoError::Config(format!("cannot start the evaluation thread: {e}")))?;
         let slots = envs
             .into_iter()
             .map(|env| Slot {
@@ -213,6 +222,7 @@ impl<E: Env> Trainer<E> {
             rng,
             progress: Progress::default(),
             pool,
+            serial_pool,
             wall_base: 0.0,
             session_start: Instant::now(),
         })
@@ -652,54 +662,16 @@ impl<E: Env> Trainer<E> {
 
     /// Mean action for one raw observation (normaliser frozen).
     pub fn act_deterministic(&self, obs: &[f32], action: &mut [f32]) -> Result<()> {
-        if obs.len() != self.obs_dim || action.len() != self.act_dim {
-            return Err(PpoError::Config(format!(
-                "act_deterministic: obs has {} values (expected {}), action {} (expected {})",
-                obs.len(),
-                self.obs_dim,
-                action.len(),
-                self.act_dim
-            )));
-        }
-        let mut x = vec![0.0f32; self.obs_dim];
-        self.norm.normalize(obs, &mut x);
-        let x = Tensor::from_vec(x, (1, self.obs_dim), &Device::Cpu)?;
-        let mean = self.policy.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
-        action.copy_from_slice(&mean);
-        Ok(())
+        mean_action(&self.policy, &self.norm, obs, action)
     }
 
     /// Run one deterministic episode from `env.reset_eval` with mean actions, for at most
     /// `max_steps` steps. The normaliser is not updated. Returns the per-step rewards.
+    /// Runs on the trainer's single evaluation thread (see `serial_pool`).
     pub fn evaluate<V: Env + ?Sized>(&self, env: &mut V, max_steps: usize) -> Result<Evaluation> {
-        if env.obs_dim() != self.obs_dim || env.act_dim() != self.act_dim {
-            return Err(PpoError::Config(format!(
-                "evaluation environment has obs {} act {}, the policy obs {} act {}",
-                env.obs_dim(),
-                env.act_dim(),
-                self.obs_dim,
-                self.act_dim
-            )));
-        }
-        let mut obs = vec![0.0f32; self.obs_dim];
-        let mut action = vec![0.0f32; self.act_dim];
-        env.reset_eval(&mut obs);
-        let mut ev = Evaluation {
-            rewards: Vec::new(),
-            terminated: false,
-            truncated: false,
-        };
-        for _ in 0..max_steps {
-            self.act_deterministic(&obs, &mut action)?;
-            let r = env.step(&action, &mut obs);
-            ev.rewards.push(r.reward);
-            if r.terminated || r.truncated {
-                ev.terminated = r.terminated;
-                ev.truncated = r.truncated && !r.terminated;
-                break;
-            }
-        }
-        Ok(ev)
+        let (policy, norm) = (&self.policy, &self.norm);
+        self.serial_pool
+            .install(|| evaluate_episode(policy, norm, env, max_steps))
     }
 
     /// Iterate until a limit is reached or `on_iteration` returns [`Control::Stop`].
@@ -758,4 +730,61 @@ pub fn parameters<E: Env>(t: &Trainer<E>) -> Result<HashMap<String, Vec<f32>>> {
         m.insert(name, v.as_tensor().flatten_all()?.to_vec1::<f32>()?);
     }
     Ok(m)
+}
+
+fn mean_action(
+    policy: &GaussianPolicy,
+    norm: &RunningNorm,
+    obs: &[f32],
+    action: &mut [f32],
+) -> Result<()> {
+    let (od, ad) = (norm.dim(), policy.act_dim());
+    if obs.len() != od || action.len() != ad {
+        return Err(PpoError::Config(format!(
+            "act_deterministic: obs has {} values (expected {od}), action {} (expected {ad})",
+            obs.len(),
+            action.len(),
+        )));
+    }
+    let mut x = vec![0.0f32; od];
+    norm.normalize(obs, &mut x);
+    let x = Tensor::from_vec(x, (1, od), &Device::Cpu)?;
+    let mean = policy.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
+    action.copy_from_slice(&mean);
+    Ok(())
+}
+
+fn evaluate_episode<V: Env + ?Sized>(
+    policy: &GaussianPolicy,
+    norm: &RunningNorm,
+    env: &mut V,
+    max_steps: usize,
+) -> Result<Evaluation> {
+    let (od, ad) = (norm.dim(), policy.act_dim());
+    if env.obs_dim() != od || env.act_dim() != ad {
+        return Err(PpoError::Config(format!(
+            "evaluation environment has obs {} act {}, the policy obs {od} act {ad}",
+            env.obs_dim(),
+            env.act_dim(),
+        )));
+    }
+    let mut obs = vec![0.0f32; od];
+    let mut action = vec![0.0f32; ad];
+    env.reset_eval(&mut obs);
+    let mut ev = Evaluation {
+        rewards: Vec::new(),
+        terminated: false,
+        truncated: false,
+    };
+    for _ in 0..max_steps {
+        mean_action(policy, norm, &obs, &mut action)?;
+        let r = env.step(&action, &mut obs);
+        ev.rewards.push(r.reward);
+        if r.terminated || r.truncated {
+            ev.terminated = r.terminated;
+            ev.truncated = r.truncated && !r.terminated;
+            break;
+        }
+    }
+    Ok(ev)
 }
