@@ -449,6 +449,12 @@ impl<E: Env> Trainer<E> {
         self.slots.iter().map(|s| &s.env)
     }
 
+    /// The training environments, mutably (e.g. to change a curriculum setting between
+    /// iterations; every iteration starts by resetting them).
+    pub fn envs_mut(&mut self) -> impl Iterator<Item = &mut E> {
+        self.slots.iter_mut().map(|s| &mut s.env)
+    }
+
     /// Cumulative wall time of the job, including time before a resume.
     pub fn wall_s(&self) -> f64 {
         self.wall_base + self.session_start.elapsed().as_secs_f64()
