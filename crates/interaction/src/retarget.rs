@@ -21,18 +21,23 @@ use crate::solve::{FootTerm, PairTerm, Problem, SolveStats, SolverOptions};
 use crate::{InteractionError, ik};
 
 /// Everything that steers a retarget.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct RetargetOptions {
     pub solver: SolverOptions,
     pub key_pairs: KeyPairOptions,
-    /// Hold planted feet (sole points in contact in the reference) in place.
-    pub plant_feet: Option<bool>,
+    /// Hold planted feet (sole points in contact in the reference) in place
+    /// (default true).
+    pub plant_feet: bool,
 }
 
-impl RetargetOptions {
-    fn plant_feet(&self) -> bool {
-        self.plant_feet.unwrap_or(true)
+impl Default for RetargetOptions {
+    fn default() -> Self {
+        RetargetOptions {
+            solver: SolverOptions::default(),
+            key_pairs: KeyPairOptions::default(),
+            plant_feet: true,
+        }
     }
 }
 
@@ -212,7 +217,7 @@ pub fn retarget(
         .collect();
 
     let mut feet = Vec::new();
-    if options.plant_feet() {
+    if options.plant_feet {
         for (p, contact) in contact::foot_contacts(a, &layout_a, &pts_a) {
             feet.push(FootTerm { point: p, contact });
         }

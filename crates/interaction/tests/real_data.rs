@@ -46,7 +46,7 @@ fn scale_one_returns_the_input() {
     // Without foot planting every term is satisfied by the source itself, so the
     // solution is the source up to the solver's tolerance.
     let free = RetargetOptions {
-        plant_feet: Some(false),
+        plant_feet: false,
         ..Default::default()
     };
     let r = retarget(&a, &b, &BoneScale::uniform(1.0).unwrap(), &free).unwrap();

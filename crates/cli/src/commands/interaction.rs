@@ -115,7 +115,7 @@ impl PairArgs {
         };
         o.key_pairs.threshold_m = self.pair_threshold;
         if self.no_plant_feet {
-            o.plant_feet = Some(false);
+            o.plant_feet = false;
         }
         for spec in &self.key_pairs {
             let Some((a, b)) = spec.split_once(':') else {
