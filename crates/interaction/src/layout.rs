@@ -57,12 +57,21 @@ pub struct Layout {
     pub rods: Vec<Rod>,
 }
 
-/// Joints whose local rotation is constant over `motion`.
+/// Joints whose local rotation is constant over `motion`. A one-frame clip
+/// says nothing about constancy: there only zero-offset joints at the identity
+/// rotation (CMU's hip joints) count as locked.
 pub fn locked_joints(motion: &Motion) -> Vec<bool> {
     let n = motion.joints();
+    let s = motion.skeleton();
     (0..n)
         .map(|j| {
             let first = motion.rotation(0, j);
+            if motion.frames() < 2 {
+                return s.joint(j).parent.is_some()
+                    && s.joint(j).offset.length() <= ZERO_OFFSET_M
+                    && motion::rotation::angle_between(first, glam::DQuat::IDENTITY)
+                        <= LOCKED_ANGLE_RAD;
+            }
             (1..motion.frames()).all(|t| {
                 motion::rotation::angle_between(first, motion.rotation(t, j)) <= LOCKED_ANGLE_RAD
             })
