@@ -35,6 +35,12 @@ enum Command {
     Metrics(commands::metrics::Args),
     /// Two-person interactions: retarget to another body size, generate variations.
     Interaction(commands::interaction::Args),
+    /// Physically correct a clip: a simulated humanoid learns to imitate it (PPO).
+    Correct(commands::correct::Args),
+    /// Benchmarks that print figures.
+    Bench(commands::bench::Args),
+    /// Train the MotionAug motion VAE on a class, or sample clips from one.
+    Vae(commands::vae::Args),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +58,9 @@ fn main() -> ExitCode {
         Command::Augment(args) => commands::augment::run(args),
         Command::Metrics(args) => commands::metrics::run(args),
         Command::Interaction(args) => commands::interaction::run(args),
+        Command::Correct(args) => commands::correct::run(args),
+        Command::Bench(args) => commands::bench::run(args),
+        Command::Vae(args) => commands::vae::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -703,8 +703,26 @@ fn build(
             });
         }
     }
-    Motion::new(skeleton, 1.0 / frame_time, root_translation, rotations)
-        .map_err(|e| errors.whole(e.to_string()).into())
+    Motion::new(
+        skeleton,
+        frame_rate(frame_time),
+        root_translation,
+        rotations,
+    )
+    .map_err(|e| errors.whole(e.to_string()).into())
+}
+
+/// Frame rate of a `Frame Time`. Exporters round the frame time to a few
+/// decimals (`0.008333` for 120 Hz, which is 120.0048 Hz taken literally), so a
+/// rate within 1e-4 (relative) of a whole number is taken to be that number.
+pub fn frame_rate(frame_time: f64) -> f64 {
+    let fps = 1.0 / frame_time;
+    let whole = fps.round();
+    if whole >= 1.0 && ((fps - whole) / whole).abs() < 1e-4 {
+        whole
+    } else {
+        fps
+    }
 }
 
 /// Read a BVH file from disk, see [`parse`].
@@ -1068,7 +1086,10 @@ mod tests {
         let m = parse(SMALL.as_bytes(), "small.bvh", Unit::Centimetres).unwrap();
         assert_eq!(m.frames(), 2);
         assert_eq!(m.joints(), 3);
-        assert!((m.fps() - 1.0 / 0.0083333).abs() < 1e-9);
+        assert_eq!(m.fps(), 120.0, "0.0083333 s is 120 Hz rounded");
+        assert_eq!(frame_rate(0.008333), 120.0);
+        assert_eq!(frame_rate(1.0 / 29.97), 1.0 / (1.0 / 29.97));
+        assert_eq!(frame_rate(0.04), 25.0);
         let p = m.world_positions(0);
         assert!((p[1] - DVec3::new(0.0, 0.5, 0.0)).length() < 1e-12);
         // Leg rotated 90 degrees about x: its end site points along -z... its

@@ -1,7 +1,10 @@
 //! One module per subcommand: its arguments and its `run`.
 
 pub mod augment;
+pub mod bench;
 pub mod convert;
+pub mod correct;
 pub mod inspect;
 pub mod interaction;
 pub mod metrics;
+pub mod vae;

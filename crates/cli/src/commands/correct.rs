@@ -1,0 +1,103 @@
+//! `motionaug correct IN --out DIR [--time-budget S] [--resume] [--residual pd|none|learned]`:
+//! physical correction of one clip by imitation learning in a simulator.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use correct::CorrectConfig;
+use physics::Residual;
+
+use crate::input::{ClipArgs, clip_name};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The clip to correct (BVH, or AMC with --skeleton).
+    input: PathBuf,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Output directory: corrected.bvh, corrected.npz, report.json, curve.svg, checkpoints/.
+    #[arg(long)]
+    out: PathBuf,
+    /// Training wall-time budget in seconds (over all resumes).
+    #[arg(long, default_value_t = 600.0)]
+    time_budget: f64,
+    /// Continue from the latest checkpoint in DIR/checkpoints.
+    #[arg(long)]
+    resume: bool,
+    /// Root force helping the character: pd (MotionAug), none, or learned (RFC).
+    #[arg(long, default_value = "pd")]
+    residual: Residual,
+    /// Stop early once the deterministic rollout reaches this R_norm (and is accepted).
+    #[arg(long, default_value_t = 0.8)]
+    target_r_norm: f64,
+    /// Parallel simulated environments.
+    #[arg(long, default_value_t = 8)]
+    envs: usize,
+    /// Rollout threads.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Stop after this many PPO iterations (for quick runs).
+    #[arg(long)]
+    max_iterations: Option<u64>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let motion = args.clip.load(&args.input)?;
+    let mut config = CorrectConfig {
+        time_budget_s: args.time_budget,
+        target_r_norm: Some(args.target_r_norm),
+        envs: args.envs,
+        max_iterations: args.max_iterations,
+        seed: args.seed,
+        ..CorrectConfig::default()
+    };
+    config.physics.residual = args.residual;
+    config.ppo.threads = args.threads;
+    let terminal = std::io::stderr().is_terminal();
+    let outcome = correct::correct(
+        &motion,
+        &clip_name(&args.input),
+        &config,
+        &args.out,
+        args.resume,
+        |p| {
+            let r = p
+                .r_norm
+                .map(|r| format!("{r:.3}"))
+                .unwrap_or_else(|| "-".into());
+            let line = format!(
+                "iter {:4}  samples {:8}  {:6.0}/{:.0} s  mean reward {:.3}  R_norm {r}",
+                p.iteration, p.samples, p.wall_s, p.budget_s, p.mean_reward
+            );
+            if terminal {
+                eprint!("\r{line}");
+            } else {
+                eprintln!("{line}");
+            }
+        },
+    )
+    .with_context(|| format!("correcting {}", args.input.display()))?;
+    if terminal {
+        eprintln!();
+    }
+    let r = &outcome.report;
+    eprintln!(
+        "R_norm {:.3} (action 0: {:.3}), mean reward {:.3}, residual force {:.3} m g, {} samples in {:.0} s: {}",
+        r.r_norm,
+        r.r_norm_action0,
+        r.mean_reward,
+        r.residual_force_ratio,
+        r.samples,
+        r.wall_s,
+        if r.accepted {
+            "accepted"
+        } else {
+            "not accepted"
+        }
+    );
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}

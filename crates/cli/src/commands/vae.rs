@@ -1,0 +1,205 @@
+//! `motionaug vae train CLIPS... --out MODEL_DIR` and
+//! `motionaug vae sample MODEL_DIR --count N --out DIR`: the MotionAug motion VAE.
+//!
+//! Train one model per action class (all clips of one actor's class, so that they
+//! share a skeleton; samples use the first clip's skeleton). Sampling writes one
+//! BVH + NPZ per sample and a `manifest.json`.
+
+use std::path::PathBuf;
+
+use ::vae::{OptimizerConfig, Prior, TrainConfig, TrainedVae};
+use anyhow::{Context, bail};
+use serde::Serialize;
+
+use crate::input::{ClipArgs, clip_name};
+use crate::output::{write_atomic, write_json};
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Subcommand)]
+enum Command {
+    /// Train a VAE on the clips of one action class.
+    Train(TrainArgs),
+    /// Generate clips from a trained VAE.
+    Sample(SampleArgs),
+}
+
+#[derive(clap::Args)]
+struct TrainArgs {
+    /// Training clips (BVH, or AMC with --skeleton), one action class.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Model directory to write (weights.safetensors + model.json).
+    #[arg(long)]
+    out: PathBuf,
+    /// Passes over the training clips (one pass = ceil(clips / batch) iterations).
+    #[arg(long, conflicts_with = "iterations")]
+    epochs: Option<u64>,
+    /// Optimiser steps (default 1500; 20000 with --reference).
+    #[arg(long)]
+    iterations: Option<u64>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Train without the frame and sequence discriminators (ablation).
+    #[arg(long)]
+    no_adversarial: bool,
+    /// The paper's sizes and optimiser (SGD lr 0.005 halved every 4000 of 20000
+    /// iterations); slow on a CPU.
+    #[arg(long)]
+    reference: bool,
+    /// Learning rate (Adam by default, SGD with --reference).
+    #[arg(long)]
+    lr: Option<f64>,
+    /// Print losses every N iterations (0: only the summary).
+    #[arg(long, default_value_t = 100)]
+    log_every: u64,
+}
+
+#[derive(clap::Args)]
+struct SampleArgs {
+    /// Model directory written by `vae train`.
+    model: PathBuf,
+    #[arg(long)]
+    count: usize,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+    /// Latent codes from `near` (sampling near samples) or `normal` (N(0, I)).
+    #[arg(long, default_value = "near")]
+    prior: Prior,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        Command::Train(a) => train(a),
+        Command::Sample(a) => sample(a),
+    }
+}
+
+fn train(args: TrainArgs) -> anyhow::Result<()> {
+    let clips = args
+        .inputs
+        .iter()
+        .map(|p| args.clip.load(p))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut config = if args.reference {
+        TrainConfig::reference()
+    } else {
+        TrainConfig::default()
+    };
+    config.seed = args.seed;
+    config.adversarial = !args.no_adversarial;
+    if let Some(lr) = args.lr {
+        config.optimizer = match config.optimizer {
+            OptimizerConfig::Sgd { halve_every, .. } => OptimizerConfig::Sgd { lr, halve_every },
+            OptimizerConfig::Adam { .. } => OptimizerConfig::Adam { lr },
+        };
+    }
+    if let Some(n) = args.iterations {
+        config.iterations = n;
+    }
+    if let Some(epochs) = args.epochs {
+        let per_epoch = clips.len().div_ceil(config.batch_size) as u64;
+        config.iterations = epochs.saturating_mul(per_epoch);
+    }
+    if config.iterations == 0 {
+        bail!("--iterations/--epochs must be at least 1");
+    }
+    eprintln!(
+        "training on {} clips ({} joints), {} iterations, adversarial {}",
+        clips.len(),
+        clips[0].joints(),
+        config.iterations,
+        config.adversarial
+    );
+    let log_every = args.log_every;
+    let model = ::vae::train(&clips, &config, |p| {
+        if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
+            let l = p.losses;
+            eprintln!(
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3}",
+                p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
+                l.adversarial, l.discriminator
+            );
+        }
+    })
+    .context("training failed")?;
+    model
+        .save(&args.out)
+        .with_context(|| format!("cannot save the model to {}", args.out.display()))?;
+    let err = model.reconstruction_error(&clips)?;
+    eprintln!(
+        "trained in {:.1} s; reconstruction on the training clips: root RMSE {:.3} m, mean joint angle {:.3} rad; saved {}",
+        model.meta().training.seconds,
+        err.root_rmse_m,
+        err.mean_joint_angle_rad,
+        args.out.display()
+    );
+    Ok(())
+}
+
+#[derive(Serialize)]
+struct ManifestEntry {
+    name: String,
+    bvh: String,
+    npz: String,
+    frames: usize,
+    fps: f64,
+    prior: Prior,
+    seed: u64,
+    index: usize,
+    model: String,
+}
+
+fn sample(args: SampleArgs) -> anyhow::Result<()> {
+    if args.count == 0 {
+        bail!("--count must be at least 1");
+    }
+    let model = TrainedVae::load(&args.model)
+        .with_context(|| format!("cannot load the model in {}", args.model.display()))?;
+    let samples = model.sample(args.count, args.prior, args.seed)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let model_name = clip_name(&args.model);
+    let prior = match args.prior {
+        Prior::Near => "near",
+        Prior::Normal => "normal",
+    };
+    let mut manifest = Vec::with_capacity(samples.len());
+    for (i, s) in samples.iter().enumerate() {
+        let name = format!("{model_name}_vae_{prior}_{i:04}");
+        let bvh = format!("{name}.bvh");
+        let npz = format!("{name}.npz");
+        write_atomic(&args.out.join(&bvh), &motion::bvh::to_bytes(&s.motion))?;
+        let z = motion::npz::NpyArray::f32("z", &[s.z.len()], &s.z)?;
+        let bytes = motion::npz::motion_to_bytes(&s.motion, &[z])
+            .with_context(|| format!("cannot encode {npz}"))?;
+        write_atomic(&args.out.join(&npz), &bytes)?;
+        manifest.push(ManifestEntry {
+            name,
+            bvh,
+            npz,
+            frames: s.motion.frames(),
+            fps: s.motion.fps(),
+            prior: s.prior,
+            seed: args.seed,
+            index: i,
+            model: args.model.display().to_string(),
+        });
+    }
+    write_json(&args.out.join("manifest.json"), &manifest)?;
+    eprintln!(
+        "wrote {} samples ({prior} prior) to {}",
+        manifest.len(),
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,321 @@
+//! One correction job: build the simulated character from the clip, train a
+//! PPO policy to imitate it within a time budget (resumable from checkpoints),
+//! then roll the final policy deterministically over the whole clip and keep
+//! what the character did.
+//!
+//! Training stops at the first of: the deterministic rollout reaching
+//! `target_r_norm` with an accepted mean reward, the time budget, or the
+//! iteration / sample limits. The curve is reported either way.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use motion::Motion;
+use physics::{ImitationEnv, Residual};
+use ppo::{Control, PpoConfig, RunLimits, StopReason, Trainer};
+
+use crate::CorrectError;
+use crate::report::{Report, curve_svg};
+use crate::rollout::{Rollout, deterministic_rollout};
+use crate::task::ImitationTask;
+
+/// Everything a correction job can be told.
+#[derive(Debug, Clone)]
+pub struct CorrectConfig {
+    pub physics: physics::Config,
+    pub ppo: PpoConfig,
+    /// Parallel environments (spread over `ppo.threads` threads).
+    pub envs: usize,
+    /// Training wall time budget, seconds, over all resumes.
+    pub time_budget_s: f64,
+    pub max_iterations: Option<u64>,
+    pub max_samples: Option<u64>,
+    /// Run the deterministic rollout every this many iterations.
+    pub eval_every: u64,
+    /// Stop once a rollout reaches this R_norm with an accepted mean reward.
+    pub target_r_norm: Option<f64>,
+    /// Mean per-step reward needed to accept the corrected clip (paper: 0.7).
+    pub accept_threshold: f64,
+    pub checkpoint_every_s: f64,
+    pub seed: u64,
+}
+
+impl Default for CorrectConfig {
+    fn default() -> Self {
+        let ppo = PpoConfig {
+            policy: ppo::PolicyConfig {
+                hidden: vec![256, 256],
+                ..ppo::PolicyConfig::default()
+            },
+            value: ppo::ValueConfig {
+                hidden: vec![256, 256],
+            },
+            policy_lr: 1e-4,
+            value_lr: 1e-3,
+            samples_per_iteration: 4096,
+            minibatch_size: 512,
+            epochs: 5,
+            ..PpoConfig::default()
+        };
+        CorrectConfig {
+            physics: physics::Config::default(),
+            ppo,
+            envs: 8,
+            time_budget_s: 600.0,
+            max_iterations: None,
+            max_samples: None,
+            eval_every: 1,
+            target_r_norm: Some(0.8),
+            accept_threshold: 0.7,
+            checkpoint_every_s: 120.0,
+            seed: 0,
+        }
+    }
+}
+
+impl CorrectConfig {
+    pub fn validate(&self) -> Result<(), CorrectError> {
+        let bad = |m: String| Err(CorrectError::Config(m));
+        if self.envs == 0 {
+            return bad("envs must be at least 1".into());
+        }
+        if !(self.time_budget_s.is_finite() && self.time_budget_s >= 0.0) {
+            return bad(format!(
+                "time budget {} s is not a duration",
+                self.time_budget_s
+            ));
+        }
+        if self.eval_every == 0 {
+            return bad("eval_every must be at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.accept_threshold) {
+            return bad(format!(
+                "accept threshold {} is not in [0, 1]",
+                self.accept_threshold
+            ));
+        }
+        self.ppo.validate()?;
+        self.physics.substeps()?;
+        Ok(())
+    }
+}
+
+/// Progress of a running job, for terminals and the service.
+#[derive(Debug, Clone)]
+pub struct ProgressEvent {
+    pub iteration: u64,
+    pub samples: u64,
+    pub wall_s: f64,
+    pub budget_s: f64,
+    pub mean_reward: f64,
+    /// R_norm of the latest deterministic rollout, when one ran this iteration.
+    pub r_norm: Option<f64>,
+}
+
+/// The result of a job: the corrected clip and its report.
+pub struct Outcome {
+    pub motion: Motion,
+    pub report: Report,
+}
+
+/// Correct `motion` (named `source` in the report), writing into `out_dir`:
+/// `corrected.bvh`, `corrected.npz`, `report.json`, `curve.svg` and
+/// `checkpoints/`. With `resume`, training continues from the latest checkpoint
+/// in `out_dir/checkpoints` (and starts fresh when there is none).
+pub fn correct(
+    motion: &Motion,
+    source: &str,
+    config: &CorrectConfig,
+    out_dir: &Path,
+    resume: bool,
+    mut on_progress: impl FnMut(&ProgressEvent),
+) -> Result<Outcome, CorrectError> {
+    config.validate()?;
+    let span = tracing::info_span!("correct", source, residual = ?config.physics.residual);
+    let _guard = span.enter();
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| CorrectError::Io { path, source }
+    };
+    std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
+    let checkpoints = out_dir.join("checkpoints");
+    let has_checkpoint = ppo::latest_checkpoint(&checkpoints)?.is_some();
+    if has_checkpoint && !resume {
+        return Err(CorrectError::Config(format!(
+            "{} already holds checkpoints of an earlier run: pass --resume to continue it, \
+             or choose another output directory",
+            checkpoints.display()
+        )));
+    }
+
+    let envs = (0..config.envs)
+        .map(|_| ImitationEnv::new(motion, &config.physics).map(ImitationTask::new))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
+    let action0 = deterministic_rollout(&mut eval_env, |_, a| {
+        a.fill(0.0);
+        Ok(())
+    })?;
+
+    let mut trainer = if has_checkpoint {
+        let (trainer, _) =
+            Trainer::new_or_resume(config.ppo.clone(), envs, config.seed, &checkpoints)?;
+        tracing::info!(iterations = trainer.progress().iterations, "resumed");
+        trainer
+    } else {
+        Trainer::new(config.ppo.clone(), envs, config.seed)?
+    };
+
+    let limits = RunLimits {
+        time_budget_s: Some(config.time_budget_s),
+        max_iterations: config.max_iterations,
+        max_samples: config.max_samples,
+        checkpoint_dir: Some(checkpoints.clone()),
+        checkpoint_every_s: config.checkpoint_every_s,
+        keep_checkpoints: 2,
+    };
+    let mut eval_error = None;
+    let mut reached_target = false;
+    let started = Instant::now();
+    let reason = trainer.run(&limits, |trainer, it| {
+        let mut r_norm = None;
+        if it.iteration % config.eval_every == 0 {
+            match evaluate(trainer, &mut eval_env) {
+                Ok(rollout) => {
+                    let r = rollout.r_norm();
+                    trainer.record_eval(r);
+                    r_norm = Some(r);
+                    let accepted = rollout.fell_at.is_none()
+                        && rollout.mean_reward() >= config.accept_threshold;
+                    reached_target = accepted && config.target_r_norm.is_some_and(|t| r >= t);
+                }
+                Err(err) => eval_error = Some(err),
+            }
+        }
+        on_progress(&ProgressEvent {
+            iteration: it.iteration,
+            samples: it.samples,
+            wall_s: it.wall_s,
+            budget_s: config.time_budget_s,
+            mean_reward: it.mean_reward,
+            r_norm,
+        });
+        if eval_error.is_some() || reached_target {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    })?;
+    if let Some(err) = eval_error {
+        return Err(err);
+    }
+    tracing::info!(
+        ?reason,
+        session_s = started.elapsed().as_secs_f64(),
+        "training stopped"
+    );
+
+    let final_rollout = evaluate(&trainer, &mut eval_env)?;
+    let progress = trainer.progress();
+    // The curve starts at the untrained tracker (action 0, which the fresh
+    // policy's near-zero output layer approximates), then one point per evaluation.
+    let curve: Vec<[f64; 3]> = std::iter::once([0.0, 0.0, action0.r_norm()])
+        .chain(
+            progress
+                .curve
+                .iter()
+                .filter_map(|p| p.eval.map(|r| [p.wall_s, p.samples as f64, r])),
+        )
+        .collect();
+    let stop_reason = match reason {
+        StopReason::Callback if reached_target => "target",
+        StopReason::Callback => "stopped",
+        StopReason::TimeBudget => "time_budget",
+        StopReason::MaxIterations => "max_iterations",
+        StopReason::MaxSamples => "max_samples",
+    };
+    let report = Report {
+        source: source.to_string(),
+        r_norm: final_rollout.r_norm(),
+        mean_reward: final_rollout.mean_reward(),
+        residual_force_ratio: final_rollout.residual_force_ratio(),
+        samples: progress.samples,
+        wall_s: progress.wall_s,
+        iterations: progress.iterations,
+        curve,
+        accepted: final_rollout.fell_at.is_none()
+            && final_rollout.mean_reward() >= config.accept_threshold,
+        accept_threshold: config.accept_threshold,
+        fell_at: final_rollout.fell_at,
+        r_norm_action0: action0.r_norm(),
+        stop_reason: stop_reason.to_string(),
+        residual: residual_name(config.physics.residual).to_string(),
+        fps: final_rollout.motion.fps(),
+        frames: final_rollout.motion.frames(),
+        plausibility_before: motion::metrics::plausibility(motion),
+        plausibility_after: motion::metrics::plausibility(&final_rollout.motion),
+    };
+    write_outputs(out_dir, &final_rollout, &report)?;
+    Ok(Outcome {
+        motion: final_rollout.motion,
+        report,
+    })
+}
+
+fn evaluate(
+    trainer: &Trainer<ImitationTask>,
+    env: &mut ImitationEnv,
+) -> Result<Rollout, CorrectError> {
+    deterministic_rollout(env, |obs, action| {
+        Ok(trainer.act_deterministic(obs, action)?)
+    })
+}
+
+pub fn residual_name(residual: Residual) -> &'static str {
+    match residual {
+        Residual::None => "none",
+        Residual::Pd => "pd",
+        Residual::Learned => "learned",
+    }
+}
+
+fn write_outputs(out_dir: &Path, rollout: &Rollout, report: &Report) -> Result<(), CorrectError> {
+    let files: [(PathBuf, Vec<u8>); 4] = [
+        (
+            out_dir.join("corrected.bvh"),
+            motion::bvh::to_bytes(&rollout.motion),
+        ),
+        (
+            out_dir.join("corrected.npz"),
+            motion::npz::motion_to_bytes(&rollout.motion, &[]).map_err(|source| {
+                CorrectError::Io {
+                    path: out_dir.join("corrected.npz"),
+                    source,
+                }
+            })?,
+        ),
+        (
+            out_dir.join("report.json"),
+            serde_json::to_vec_pretty(report).map_err(|e| CorrectError::Config(e.to_string()))?,
+        ),
+        (
+            out_dir.join("curve.svg"),
+            curve_svg(&report.curve, &format!("{}: R_norm", report.source)).into_bytes(),
+        ),
+    ];
+    for (path, bytes) in files {
+        write_atomic(&path, &bytes)?;
+    }
+    Ok(())
+}
+
+/// Temporary file + rename, so a crash never leaves half a file.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CorrectError> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(|source| CorrectError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}

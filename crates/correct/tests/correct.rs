@@ -1,0 +1,106 @@
+//! A short correction job end to end on the bundled kick clip: outputs,
+//! report fields, honesty of the corrected motion, and resume.
+
+use std::path::Path;
+
+use correct::{CorrectConfig, Report, correct};
+use motion::{LoadOptions, Motion, load};
+
+fn kick() -> Motion {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    load(
+        data.join("HDM_bd_kickLFront1Reps_001_120.amc"),
+        &LoadOptions {
+            skeleton: Some(data.join("HDM_bd.asf")),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+fn tiny(max_iterations: u64) -> CorrectConfig {
+    let mut config = CorrectConfig {
+        envs: 2,
+        max_iterations: Some(max_iterations),
+        target_r_norm: None,
+        checkpoint_every_s: 0.0,
+        ..CorrectConfig::default()
+    };
+    config.ppo.policy.hidden = vec![32, 32];
+    config.ppo.value.hidden = vec![32, 32];
+    config.ppo.samples_per_iteration = 128;
+    config.ppo.minibatch_size = 64;
+    config.ppo.epochs = 2;
+    config
+}
+
+#[test]
+fn short_job_writes_honest_outputs_and_resumes() {
+    let clip = kick();
+    let dir = tempfile::tempdir().unwrap();
+    let out = correct(&clip, "kick", &tiny(2), dir.path(), false, |_| {}).unwrap();
+
+    for file in ["corrected.bvh", "corrected.npz", "report.json", "curve.svg"] {
+        assert!(dir.path().join(file).exists(), "{file} missing");
+    }
+    let report: Report =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report.iterations, 2);
+    assert!(report.samples >= 256);
+    assert!((0.0..=1.0).contains(&report.r_norm));
+    assert!(report.residual_force_ratio > 0.0);
+    assert_eq!(
+        report.curve.len(),
+        3,
+        "the action-0 point and one per iteration"
+    );
+    assert_eq!(report.curve[0], [0.0, 0.0, report.r_norm_action0]);
+    assert_eq!(
+        report.accepted,
+        report.fell_at.is_none() && report.mean_reward >= 0.7
+    );
+
+    // Honest: the corrected clip is the simulated character, not the reference.
+    let corrected =
+        motion::load(dir.path().join("corrected.bvh"), &LoadOptions::default()).unwrap();
+    assert_eq!(corrected.fps(), 30.0);
+    let reference = motion::resample::resample(&clip, 30.0).unwrap();
+    let frames = corrected.frames().min(reference.frames());
+    let mut diff = 0.0;
+    for t in 0..frames {
+        let (a, b) = (corrected.world_positions(t), reference.world_positions(t));
+        diff += a
+            .iter()
+            .zip(&b)
+            .map(|(p, q)| (*p - *q).length())
+            .sum::<f64>()
+            / a.len() as f64;
+    }
+    let mean_diff = diff / frames as f64;
+    assert!(
+        mean_diff > 1e-3,
+        "corrected clip equals the reference ({mean_diff} m)"
+    );
+    assert!(
+        mean_diff < 0.5,
+        "corrected clip is far from the reference ({mean_diff} m)"
+    );
+    assert_eq!(out.motion.frames(), corrected.frames());
+
+    // A second run without --resume refuses to overwrite the checkpoints...
+    assert!(correct(&clip, "kick", &tiny(3), dir.path(), false, |_| {}).is_err());
+    // ...and with it, continues where the first stopped.
+    let resumed = correct(&clip, "kick", &tiny(3), dir.path(), true, |_| {}).unwrap();
+    assert_eq!(resumed.report.iterations, 3);
+    assert!(resumed.report.samples > report.samples);
+    assert_eq!(resumed.report.curve[..3], report.curve[..]);
+}
+
+#[test]
+fn bad_settings_are_rejected_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = tiny(1);
+    config.envs = 0;
+    assert!(correct(&kick(), "kick", &config, dir.path(), false, |_| {}).is_err());
+    assert!(!dir.path().join("checkpoints").exists());
+}
