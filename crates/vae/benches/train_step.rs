@@ -72,6 +72,13 @@ fn time_lstm(b: usize, t: usize, i: usize, h: usize, reps: usize) {
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let steps = if quick { 3 } else { 10 };
+    let lstm_only = std::env::args().any(|a| a == "lstm");
+    if lstm_only {
+        let (d, r) = (VaeConfig::default(), VaeConfig::reference());
+        time_lstm(6, 59, d.dec_input, d.dec_hidden, steps * 2);
+        time_lstm(6, 59, r.dec_input, r.dec_hidden, steps);
+        return;
+    }
     let clips = kick_clips();
     let frames: Vec<usize> = clips
         .iter()

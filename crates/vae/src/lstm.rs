@@ -56,13 +56,25 @@ impl Lstm {
     /// Returns `(B, T, H)`, outputs in time order for both directions.
     pub fn forward(&self, x: &Tensor, mask: &Tensor, dir: Direction) -> Result<Tensor> {
         let (b, t, i) = x.dims3()?;
+        // Time-major so that a step's slice is contiguous.
         let proj = x
             .reshape((b * t, i))?
             .matmul(&self.w_ih_t)?
             .broadcast_add(&self.bias)?
-            .reshape((b, t, 4 * self.hidden))?;
+            .reshape((b, t, 4 * self.hidden))?
+            .transpose(0, 1)?
+            .contiguous()?;
+        // candle's backward of a slice pads its gradient to the full tensor, so
+        // slicing T steps straight out of the projection would cost O(T^2) in the
+        // backward pass. Slicing blocks of ~sqrt(T) steps first, then steps out of
+        // the blocks, costs O(T^1.5).
+        let block = ((t as f64).sqrt().ceil() as usize).max(1);
+        let blocks: Vec<Tensor> = (0..t)
+            .step_by(block)
+            .map(|s| proj.narrow(0, s, block.min(t - s)))
+            .collect::<candle_core::Result<_>>()?;
         self.recur(b, t, mask, dir, |step| {
-            Ok(proj.narrow(1, step, 1)?.squeeze(1)?)
+            Ok(blocks[step / block].get(step % block)?)
         })
     }
 
