@@ -56,6 +56,9 @@ struct TrainArgs {
     /// Learning rate (Adam by default, SGD with --reference).
     #[arg(long)]
     lr: Option<f64>,
+    /// Weight of the generator's adversarial (hinge) terms.
+    #[arg(long)]
+    adversarial_weight: Option<f64>,
     /// Print losses every N iterations (0: only the summary).
     #[arg(long, default_value_t = 100)]
     log_every: u64,
@@ -102,6 +105,9 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
             OptimizerConfig::Sgd { halve_every, .. } => OptimizerConfig::Sgd { lr, halve_every },
             OptimizerConfig::Adam { .. } => OptimizerConfig::Adam { lr },
         };
+    }
+    if let Some(w) = args.adversarial_weight {
+        config.weights.adversarial = w;
     }
     if let Some(n) = args.iterations {
         config.iterations = n;
