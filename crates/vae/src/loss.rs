@@ -21,7 +21,9 @@ pub struct LossWeights {
     /// On the KL term averaged over latent dimensions (see `kl`).
     pub kl: f64,
     /// On the generator's adversarial terms (frame + sequence). The notes give no
-    /// number; 0.01 keeps them below the reconstruction error of a trained model.
+    /// number. Measured on 6 HDM05 kick clips, 500 Adam iterations: 0.01 stalls
+    /// reconstruction (0.27 rad mean joint error, worse than untrained), 0.001
+    /// trains like no adversarial term (0.15 rad; README).
     pub adversarial: f64,
 }
 
@@ -30,7 +32,7 @@ impl Default for LossWeights {
         LossWeights {
             smooth: 0.001,
             kl: 0.01,
-            adversarial: 0.01,
+            adversarial: 0.001,
         }
     }
 }
