@@ -7,32 +7,18 @@
 //! outside its nominal limits, and the IK must not snap such a frame when it
 //! barely moves it.
 
-use glam::{DMat3, DQuat};
-use motion::{Axis, JointLimits};
-
-fn el(m: &DMat3, r: usize, c: usize) -> f64 {
-    m.col(c)[r]
-}
+use glam::DQuat;
+use motion::{Axis, JointLimits, rotation};
 
 /// Angles `[a, b, c]` with `q = R(order[0], a) R(order[1], b) R(order[2], c)`;
-/// the axes must be distinct.
+/// the axes must be distinct. The Euler maths is the motion crate's.
 pub fn decompose(q: DQuat, order: [Axis; 3]) -> [f64; 3] {
-    let [i, j, k] = order.map(Axis::index);
-    let e = if (j + 3 - i) % 3 == 1 { 1.0 } else { -1.0 };
-    let m = DMat3::from_quat(q);
-    let b = (e * el(&m, i, k)).clamp(-1.0, 1.0).asin();
-    let a = (-e * el(&m, j, k)).atan2(el(&m, k, k));
-    let c = (-e * el(&m, i, j)).atan2(el(&m, i, i));
-    [a, b, c]
+    let angles = rotation::to_channels(q, &order);
+    [angles[0], angles[1], angles[2]]
 }
 
 pub fn compose(angles: [f64; 3], order: [Axis; 3]) -> DQuat {
-    order
-        .iter()
-        .zip(angles)
-        .fold(DQuat::IDENTITY, |q, (ax, a)| {
-            q * DQuat::from_axis_angle(ax.unit(), a)
-        })
+    rotation::from_channels(&order, &angles)
 }
 
 /// The dof axes followed by the locked ones; `None` if the dofs repeat an axis.
