@@ -304,18 +304,7 @@ fn write_outputs(out_dir: &Path, rollout: &Rollout, report: &Report) -> Result<(
         ),
     ];
     for (path, bytes) in files {
-        write_atomic(&path, &bytes)?;
+        motion::io::write_atomic(&path, &bytes)?;
     }
     Ok(())
-}
-
-/// Temporary file + rename, so a crash never leaves half a file.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CorrectError> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|source| CorrectError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
 }

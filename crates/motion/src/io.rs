@@ -177,6 +177,41 @@ pub fn parse_named(
     }
 }
 
+/// Write `bytes` to `path` atomically: a temporary file in the same directory,
+/// synced, then renamed, so a crash never leaves half a file behind.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MotionError> {
+    use std::io::Write;
+    let io_error = |source| MotionError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| {
+        io_error(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a file path",
+        ))
+    })?;
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io_error)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
