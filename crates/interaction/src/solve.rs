@@ -28,8 +28,11 @@
 //!   (so their distance is kept), with a weight ramping in and out around the
 //!   contact stretch.
 //! * **Planted feet**: a sole point in contact in the reference stays at its
-//!   reference height and, while contact lasts, at its previous horizontal
-//!   position (no skating).
+//!   reference height and, while contact lasts, at the horizontal position
+//!   it had when the contact began (no skating, and no slow drift). Out of
+//!   contact it is kept (weight `swing`) at least at its reference height, its
+//!   horizontal position left free (a one-sided projection in the local step,
+//!   like the rods): a body pulled down cannot drag it into ground contact.
 //! * **Temporal smoothness**: each point moves from its solved previous position
 //!   by the reference's velocity (warm start and damping in one).
 //! * **Anchor**: a weak pull to the reference, fixing the translation the
@@ -56,6 +59,8 @@ pub struct SolverOptions {
     pub rod: f64,
     pub key_pair: f64,
     pub foot: f64,
+    /// Weight holding a sole point out of contact at its reference height.
+    pub swing: f64,
     pub temporal: f64,
     pub anchor: f64,
     /// Local/global iterations per frame (the first frame gets four times as many).
@@ -76,6 +81,7 @@ impl Default for SolverOptions {
             rod: 100.0,
             key_pair: 30.0,
             foot: 100.0,
+            swing: 10.0,
             temporal: 0.5,
             anchor: 0.05,
             iterations: 120,
@@ -96,6 +102,7 @@ impl SolverOptions {
             ("rod", self.rod),
             ("key_pair", self.key_pair),
             ("foot", self.foot),
+            ("swing", self.swing),
             ("temporal", self.temporal),
             ("anchor", self.anchor),
             ("tolerance_m", self.tolerance_m),
@@ -181,6 +188,8 @@ impl Problem {
         let mut out: Vec<DVec3> = Vec::with_capacity(self.frames * n);
         let mut stats = SolveStats::default();
         let mut neighbours: Vec<(usize, f64)> = Vec::new();
+        let mut anchors = vec![DVec3::ZERO; self.feet.len()];
+        let mut swing: Vec<(usize, f64)> = Vec::new();
         for t in 0..self.frames {
             let src = &self.source[t * n..(t + 1) * n];
             let refp = &self.reference[t * n..(t + 1) * n];
@@ -246,16 +255,27 @@ impl Problem {
                     rhs[p.b] -= w * target;
                 }
             }
-            for f in &self.feet {
+            swing.clear();
+            for (f, anchor) in self.feet.iter().zip(anchors.iter_mut()) {
+                let i = f.point;
                 if !f.contact[t] {
+                    // Swing: keep at least the reference clearance, so a body
+                    // pulled down does not drag a swinging sole into ground contact
+                    // while it still moves. Height only, one-sided: projected in
+                    // the local step.
+                    if o.swing > 0.0 {
+                        m[(i, i)] += o.swing;
+                        swing.push((i, refp[i].y));
+                    }
                     continue;
                 }
-                let i = f.point;
-                let horizontal = match prev {
-                    Some(p) if f.contact[t - 1] => p[i],
-                    _ => predicted[i],
-                };
-                let target = DVec3::new(horizontal.x, refp[i].y, horizontal.z);
+                // A contact's horizontal target is fixed when it starts: holding
+                // the previous *solved* position instead lets the slip of every
+                // frame add up whenever other terms pull on the body.
+                if t == 0 || !f.contact[t - 1] {
+                    *anchor = predicted[i];
+                }
+                let target = DVec3::new(anchor.x, refp[i].y, anchor.z);
                 m[(i, i)] += o.foot;
                 rhs[i] += o.foot * target;
             }
@@ -296,6 +316,13 @@ impl Problem {
                     for c in 0..3 {
                         b[(r.a, c)] += p[c];
                         b[(r.b, c)] -= p[c];
+                    }
+                }
+                for &(i, y) in &swing {
+                    // Projection onto {height >= y}: only a sole that sinks is held.
+                    let p = o.swing * DVec3::new(x[i].x, x[i].y.max(y), x[i].z);
+                    for c in 0..3 {
+                        b[(i, c)] += p[c];
                     }
                 }
                 let sol = chol.solve(&b);

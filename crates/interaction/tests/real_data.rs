@@ -184,3 +184,26 @@ fn squats_have_no_key_pairs_and_variations_are_seeded() {
     }
     assert_ne!(v1[0].scale, v1[1].scale);
 }
+
+/// A small partner B (0.75) pulls A down towards the handshake. A's swinging
+/// soles used to sink into the ground-contact band while still moving, which
+/// the metrics count as skating (0.117 m/s, above the source's 0.113); the
+/// one-sided swing-height term keeps them clear (0.035 m/s measured).
+#[test]
+fn small_partner_does_not_make_a_skate() {
+    let Some((a, b)) = pair("18_01_walk_shake_hands") else {
+        return;
+    };
+    let r = retarget(
+        &a,
+        &b,
+        &BoneScale::uniform(0.75).unwrap(),
+        &RetargetOptions::default(),
+    )
+    .unwrap();
+    let f = &r.report.foot_skating;
+    assert!(
+        f.a_output_m_s < 0.06 && f.a_output_m_s < 0.5 * f.a_source_m_s,
+        "{f:?}"
+    );
+}
