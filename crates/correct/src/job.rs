@@ -38,6 +38,11 @@ pub struct CorrectConfig {
     pub accept_threshold: f64,
     pub checkpoint_every_s: f64,
     pub seed: u64,
+    /// Start a fresh run from the policy, value and normaliser of another job's
+    /// checkpoints (a directory of checkpoints, whose latest is used), e.g. the
+    /// source clip's correction for a synthesised variant of it. Ignored when
+    /// resuming this job's own checkpoint.
+    pub warm_start: Option<PathBuf>,
 }
 
 impl Default for CorrectConfig {
@@ -69,6 +74,7 @@ impl Default for CorrectConfig {
             accept_threshold: 0.7,
             checkpoint_every_s: 120.0,
             seed: 0,
+            warm_start: None,
         }
     }
 }
@@ -157,13 +163,18 @@ pub fn correct(
         Ok(())
     })?;
 
+    let mut warm_from = None;
     let mut trainer = if has_checkpoint {
         let (trainer, _) =
             Trainer::new_or_resume(config.ppo.clone(), envs, config.seed, &checkpoints)?;
         tracing::info!(iterations = trainer.progress().iterations, "resumed");
         trainer
     } else {
-        Trainer::new(config.ppo.clone(), envs, config.seed)?
+        let mut trainer = Trainer::new(config.ppo.clone(), envs, config.seed)?;
+        if let Some(from) = &config.warm_start {
+            warm_from = Some(trainer.warm_start(from)?.display().to_string());
+        }
+        trainer
     };
 
     let limits = RunLimits {
@@ -252,6 +263,7 @@ pub fn correct(
         residual: residual_name(config.physics.residual).to_string(),
         fps: final_rollout.motion.fps(),
         frames: final_rollout.motion.frames(),
+        warm_start: warm_from,
         plausibility_before: motion::metrics::plausibility(motion),
         plausibility_after: motion::metrics::plausibility(&final_rollout.motion),
     };

@@ -36,6 +36,9 @@ pub struct Report {
     /// Frame rate of the corrected clip (the control rate).
     pub fps: f64,
     pub frames: usize,
+    /// Checkpoint the policy was warm-started from, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_start: Option<String>,
     pub plausibility_before: Plausibility,
     pub plausibility_after: Plausibility,
 }

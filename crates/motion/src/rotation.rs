@@ -25,6 +25,30 @@ pub fn to_rotation_vector(q: DQuat) -> DVec3 {
     }
 }
 
+/// The continuous 6D representation of a rotation (Zhou et al. 2019): the first
+/// two columns of its matrix, `[x axis, y axis]`.
+pub fn to_6d(q: DQuat) -> [f64; 6] {
+    let a = q * DVec3::X;
+    let b = q * DVec3::Y;
+    [a.x, a.y, a.z, b.x, b.y, b.z]
+}
+
+/// The rotation nearest a 6D vector (Gram-Schmidt on its two 3-vectors).
+/// Degenerate inputs (zero or parallel columns) fall back to the nearest
+/// well-defined axis, so the result is always a rotation.
+pub fn from_6d(v: &[f64; 6]) -> DQuat {
+    let a = DVec3::new(v[0], v[1], v[2]);
+    let b = DVec3::new(v[3], v[4], v[5]);
+    let x = a.try_normalize().unwrap_or(DVec3::X);
+    let mut y = b - x * x.dot(b);
+    if y.length_squared() < 1e-18 {
+        y = x.any_orthonormal_vector();
+    }
+    let y = y.normalize();
+    let z = x.cross(y);
+    DQuat::from_mat3(&glam::DMat3::from_cols(x, y, z)).normalize()
+}
+
 /// Angle of the rotation between two unit quaternions, in [0, pi].
 ///
 /// Computed as `2 atan2(|v|, |w|)` of `a^-1 b`, which keeps full precision for

@@ -17,7 +17,7 @@
 
 use std::sync::Arc;
 
-use motion::glam::{DMat3, DQuat, DVec3};
+use motion::glam::{DQuat, DVec3};
 use motion::{Motion, Skeleton};
 use serde::{Deserialize, Serialize};
 
@@ -58,26 +58,18 @@ pub fn heading(root_rotation: DQuat) -> f64 {
     f.x.atan2(f.z)
 }
 
-/// First two columns of the rotation matrix of `q`.
+/// First two columns of the rotation matrix of `q` (see [`motion::rotation::to_6d`]).
 pub fn quat_to_6d(q: DQuat) -> [f64; 6] {
-    let a = q * DVec3::X;
-    let b = q * DVec3::Y;
-    [a.x, a.y, a.z, b.x, b.y, b.z]
+    motion::rotation::to_6d(q)
 }
 
-/// Gram-Schmidt on two 3-vectors; degenerate inputs (zero or parallel columns)
-/// fall back to the nearest well-defined axis so that the result is always a rotation.
+/// The rotation nearest the first six numbers of `v` (see [`motion::rotation::from_6d`]).
 pub fn rotation_from_6d(v: &[f64]) -> DQuat {
-    let a = DVec3::new(v[0], v[1], v[2]);
-    let b = DVec3::new(v[3], v[4], v[5]);
-    let x = a.try_normalize().unwrap_or(DVec3::X);
-    let mut y = b - x * x.dot(b);
-    if y.length_squared() < 1e-18 {
-        y = x.any_orthonormal_vector();
+    let mut six = [0.0; 6];
+    for (s, x) in six.iter_mut().zip(v) {
+        *s = *x;
     }
-    let y = y.normalize();
-    let z = x.cross(y);
-    DQuat::from_mat3(&DMat3::from_cols(x, y, z)).normalize()
+    motion::rotation::from_6d(&six)
 }
 
 /// The frames of a clip (already at the wanted frame rate), row-major

@@ -1,21 +1,25 @@
 //! `motionaug augment IN... --recipe RECIPE --out DIR [--seed N]`.
 //!
 //! Every input is read and checked before any work starts, so a typo in the
-//! tenth file does not cost the first nine clips' work. Clips run in parallel;
-//! each output is written atomically as BVH + NPZ as soon as it is made, and
-//! `manifest.json` lists every output at the end (sorted, so it does not depend
-//! on thread scheduling).
+//! tenth file does not cost the first nine clips' work. The recipe runs as the
+//! pipeline crate's job graph in this process: synthesis in parallel, then (with
+//! `[correct]` / `[debias]` / `[vae]` / `[interaction]` tables) the heavier jobs
+//! one after another. Each output is written atomically as BVH + NPZ once its
+//! last stage is done, and `manifest.json` lists every output at the end
+//! (sorted, so it does not depend on thread scheduling). Corrections keep their
+//! checkpoints in `OUT/work/`: rerunning the same command after a crash reuses
+//! finished corrections and resumes interrupted ones.
 
 use std::collections::HashMap;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use motion::Motion;
+use pipeline::{Clip, Event, Options, Recipe};
 use rayon::prelude::*;
-use synth::{Generated, ManifestEntry, Recipe};
 
 use crate::input::{ClipArgs, clip_name};
-use crate::output::{write_atomic, write_json};
 use crate::progress;
 
 #[derive(clap::Args)]
@@ -25,7 +29,8 @@ pub struct Args {
     inputs: Vec<PathBuf>,
     #[command(flatten)]
     clip: ClipArgs,
-    /// Recipe file: TOML (`[[ops]]` tables), or JSON with the same structure.
+    /// Recipe file: TOML (`[[ops]]`, `[vae]`, `[interaction]`, `[correct]`, `[debias]`
+    /// tables), or JSON with the same structure.
     #[arg(long)]
     recipe: PathBuf,
     /// Output directory (created if missing).
@@ -37,72 +42,93 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let recipe = read_recipe(&args.recipe)?;
+    let recipe = Recipe::from_file(&args.recipe)?;
     let seed = recipe.effective_seed(args.seed);
     let clips = load_all(&args.inputs, &args.clip)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-
-    let total = (clips.len() * recipe.outputs_per_clip()) as u64;
-    let bar = progress::bar(total, "augment");
-    let results: Vec<(String, anyhow::Result<ManifestEntry>)> = clips
-        .par_iter()
-        .flat_map_iter(|(name, source, motion)| {
-            let recipe = &recipe;
-            let bar = &bar;
-            let out = &args.out;
-            recipe.jobs(name, seed).into_iter().map(move |job| {
-                let entry = synth::run_job(recipe, name, motion, job)
-                    .map_err(anyhow::Error::from)
-                    .and_then(|generated| write_output(out, &generated, source));
-                bar.inc(1);
-                (name.clone(), entry)
-            })
+    let clips: Vec<Clip> = clips
+        .into_iter()
+        .map(|(name, source, motion)| Clip {
+            name,
+            source,
+            motion,
         })
         .collect();
+
+    let bar = progress::bar(0, "augment");
+    let terminal = std::io::stderr().is_terminal();
+    let on_event = |event: Event<'_>| match event {
+        Event::Planned { jobs } => bar.set_length(jobs as u64),
+        Event::JobStarted { job } => {
+            if !matches!(job.kind, pipeline::JobKind::Synthesize { .. }) {
+                let line = format!("{} ...", job.key);
+                if terminal {
+                    bar.set_message(line);
+                } else {
+                    eprintln!("{line}");
+                }
+            }
+        }
+        Event::JobFinished { .. } => bar.inc(1),
+        Event::Correction { job, progress: p } => {
+            let r = p
+                .r_norm
+                .map(|r| format!("{r:.3}"))
+                .unwrap_or_else(|| "-".into());
+            let line = format!(
+                "{}: iter {} samples {} {:.0}/{:.0} s R_norm {r}",
+                job.key, p.iteration, p.samples, p.wall_s, p.budget_s
+            );
+            if terminal {
+                bar.set_message(line);
+            } else {
+                eprintln!("{line}");
+            }
+        }
+    };
+    let work = args.out.join("work");
+    let summary = pipeline::run(
+        &recipe,
+        &clips,
+        &Options {
+            out: Some(&args.out),
+            work: &work,
+            seed,
+            on_event: &on_event,
+        },
+    )?;
     bar.finish_and_clear();
 
-    let mut manifest = Vec::new();
-    let mut failures = Vec::new();
-    for (clip, result) in results {
-        match result {
-            Ok(entry) => manifest.push(entry),
-            Err(err) => failures.push(format!("{clip}: {err:#}")),
-        }
-    }
-    manifest.sort_by(|a, b| {
-        (a.source.as_str(), a.op_index, a.copy).cmp(&(b.source.as_str(), b.op_index, b.copy))
-    });
-    write_json(&args.out.join("manifest.json"), &manifest)?;
     eprintln!(
-        "wrote {} outputs from {} clips to {}",
-        manifest.len(),
+        "wrote {} outputs from {} clips to {}{}",
+        summary.manifest.len(),
         clips.len(),
-        args.out.display()
+        args.out.display(),
+        if summary.rejected.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({} not accepted by physical correction and left out: {})",
+                summary.rejected.len(),
+                summary.rejected.join(", ")
+            )
+        }
     );
-    if !failures.is_empty() {
+    if !summary.failures.is_empty() {
+        let lines: Vec<String> = summary
+            .failures
+            .iter()
+            .map(|(job, why)| format!("{job}: {why}"))
+            .collect();
         bail!(
-            "{} of {} outputs failed:\n  {}",
-            failures.len(),
-            total,
-            failures.join("\n  ")
+            "{} of {} jobs failed:\n  {}",
+            lines.len(),
+            summary.jobs,
+            lines.join("\n  ")
         );
     }
     Ok(())
-}
-
-fn read_recipe(path: &Path) -> anyhow::Result<Recipe> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read recipe {}", path.display()))?;
-    let is_json = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    let recipe = if is_json {
-        Recipe::from_json_str(&text)
-    } else {
-        Recipe::from_toml_str(&text)
-    };
-    recipe.with_context(|| format!("bad recipe {}", path.display()))
 }
 
 /// Read every input (in parallel) and fail with every bad file named.
@@ -135,27 +161,4 @@ fn load_all(inputs: &[PathBuf], args: &ClipArgs) -> anyhow::Result<Vec<(String, 
         );
     }
     Ok(clips)
-}
-
-/// Write one output as `<name>.bvh` and `<name>.npz` (with its occlusion mask
-/// as a `mask` array, uint8 [T, J], 1 = visible) and describe it.
-fn write_output(out: &Path, generated: &Generated, source: &str) -> anyhow::Result<ManifestEntry> {
-    let motion = &generated.output.motion;
-    let bvh_name = format!("{}.bvh", generated.name);
-    let npz_name = format!("{}.npz", generated.name);
-    write_atomic(&out.join(&bvh_name), &motion::bvh::to_bytes(motion))?;
-    let mut extras = Vec::new();
-    if let Some(mask) = &generated.output.mask {
-        let visible: Vec<bool> = mask.rows().into_iter().flatten().collect();
-        extras.push(motion::npz::NpyArray::bool(
-            "mask",
-            &[motion.frames(), motion.joints()],
-            &visible,
-        )?);
-    }
-    write_atomic(
-        &out.join(&npz_name),
-        &motion::npz::motion_to_bytes(motion, &extras)?,
-    )?;
-    Ok(generated.manifest_entry(bvh_name, source))
 }

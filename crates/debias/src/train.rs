@@ -1,0 +1,480 @@
+//! Fitting the debiasing MLP and applying it.
+//!
+//! Training pairs are (corrected original, original). The original is
+//! resampled to the corrected clip's frame rate and both are cut to the shorter
+//! length (a correction that fell ends early). Inputs and targets are
+//! standardised with statistics of the training set, which are saved with the
+//! weights. The target is the change of state `original - corrected`; applying
+//! adds the predicted change to a corrected clip's states.
+
+use std::path::Path;
+use std::time::Instant;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
+use motion::Motion;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::features::{apply_states, input_dim, inputs, state_dim, states};
+use crate::model::{Mlp, MlpConfig};
+use crate::{DebiasError, Result};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    pub hidden: Vec<usize>,
+    /// Optimiser steps.
+    pub iterations: usize,
+    /// Frames per step.
+    pub batch_size: usize,
+    pub learning_rate: f64,
+    pub weight_decay: f64,
+    pub seed: u64,
+}
+
+impl Default for TrainConfig {
+    /// The paper's 4 x 512 network, AdamW 1e-3, 2000 steps of 256 frames.
+    fn default() -> Self {
+        TrainConfig {
+            hidden: vec![512; 4],
+            iterations: 2000,
+            batch_size: 256,
+            learning_rate: 1e-3,
+            weight_decay: 1e-4,
+            seed: 0,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(DebiasError::Config(m));
+        if self.iterations == 0 {
+            return bad("iterations must be at least 1".into());
+        }
+        if self.batch_size == 0 {
+            return bad("batch_size must be at least 1".into());
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return bad(format!(
+                "learning_rate {} is not positive",
+                self.learning_rate
+            ));
+        }
+        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
+            return bad(format!("weight_decay {} is negative", self.weight_decay));
+        }
+        Ok(())
+    }
+}
+
+/// What training measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainReport {
+    pub pairs: usize,
+    pub frames: usize,
+    pub iterations: usize,
+    /// Mean squared state error (standardised units) before training: corrected vs original.
+    pub loss_before: f64,
+    /// The same after training (training set).
+    pub loss_after: f64,
+    pub wall_s: f64,
+}
+
+/// Mean and standard deviation per column (std floored so constant columns stay finite).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Standardiser {
+    mean: Vec<f32>,
+    std: Vec<f32>,
+}
+
+impl Standardiser {
+    fn fit(rows: &[f32], dim: usize) -> Standardiser {
+        let n = (rows.len() / dim).max(1) as f64;
+        let mut mean = vec![0.0f64; dim];
+        for r in rows.chunks_exact(dim) {
+            for (m, x) in mean.iter_mut().zip(r) {
+                *m += *x as f64 / n;
+            }
+        }
+        let mut var = vec![0.0f64; dim];
+        for r in rows.chunks_exact(dim) {
+            for ((v, x), m) in var.iter_mut().zip(r).zip(&mean) {
+                *v += (*x as f64 - m).powi(2) / n;
+            }
+        }
+        Standardiser {
+            mean: mean.iter().map(|m| *m as f32).collect(),
+            std: var.iter().map(|v| (v.sqrt() as f32).max(1e-3)).collect(),
+        }
+    }
+
+    fn apply(&self, rows: &[f32]) -> Vec<f32> {
+        let d = self.mean.len();
+        rows.iter()
+            .enumerate()
+            .map(|(i, x)| (x - self.mean[i % d]) / self.std[i % d])
+            .collect()
+    }
+
+    fn invert(&self, rows: &[f32]) -> Vec<f32> {
+        let d = self.mean.len();
+        rows.iter()
+            .enumerate()
+            .map(|(i, x)| x * self.std[i % d] + self.mean[i % d])
+            .collect()
+    }
+}
+
+/// Saved next to the weights as `debias.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Meta {
+    format: u32,
+    joints: usize,
+    fps: f64,
+    mlp: MlpConfig,
+    input: Standardiser,
+    output: Standardiser,
+    report: TrainReport,
+}
+
+const FORMAT: u32 = 1;
+const WEIGHTS: &str = "debias.safetensors";
+const META: &str = "debias.json";
+
+/// A trained debiasing network with its standardisation.
+pub struct Debiaser {
+    meta: Meta,
+    vars: VarMap,
+    mlp: Mlp,
+}
+
+/// Align a pair at the corrected clip's frame rate and length.
+fn aligned(corrected: &Motion, original: &Motion) -> Result<(Vec<f32>, Vec<f32>)> {
+    if corrected.joints() != original.joints() {
+        return Err(DebiasError::Data(format!(
+            "a pair has {} and {} joints: the corrected clip must be on the original's skeleton",
+            corrected.joints(),
+            original.joints()
+        )));
+    }
+    let original = if (original.fps() - corrected.fps()).abs() > 1e-6 {
+        motion::resample::resample(original, corrected.fps())?
+    } else {
+        original.clone()
+    };
+    let dim = state_dim(corrected.joints());
+    let n = corrected.frames().min(original.frames());
+    let mut a = states(corrected);
+    let mut b = states(&original);
+    a.truncate(n * dim);
+    b.truncate(n * dim);
+    Ok((a, b))
+}
+
+/// Train on pairs `(corrected original, original)`.
+pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debiaser, TrainReport)> {
+    config.validate()?;
+    let span = tracing::info_span!("debias_train", pairs = pairs.len());
+    let _guard = span.enter();
+    let started = Instant::now();
+    let Some((first, _)) = pairs.first() else {
+        return Err(DebiasError::Data("no training pairs".into()));
+    };
+    let joints = first.joints();
+    let fps = first.fps();
+    let (sd, id) = (state_dim(joints), input_dim(joints));
+    let mut x_rows = Vec::new();
+    let mut y_rows = Vec::new();
+    for (i, (corrected, original)) in pairs.iter().enumerate() {
+        if corrected.joints() != joints || (corrected.fps() - fps).abs() > 1e-6 {
+            return Err(DebiasError::Data(format!(
+                "pair {i}: {} joints at {} fps, the first pair has {joints} at {fps}",
+                corrected.joints(),
+                corrected.fps()
+            )));
+        }
+        let (c, o) = aligned(corrected, original)?;
+        x_rows.extend(inputs(&c, sd));
+        y_rows.extend(o.iter().zip(&c).map(|(o, c)| o - c));
+    }
+    let frames = y_rows.len() / sd;
+    if frames < 2 {
+        return Err(DebiasError::Data(
+            "fewer than two frames of training data".into(),
+        ));
+    }
+    let input = Standardiser::fit(&x_rows, id);
+    let output = Standardiser::fit(&y_rows, sd);
+    let x = Tensor::from_vec(input.apply(&x_rows), (frames, id), &Device::Cpu)?;
+    let y = Tensor::from_vec(output.apply(&y_rows), (frames, sd), &Device::Cpu)?;
+
+    let mlp_config = MlpConfig {
+        input: id,
+        hidden: config.hidden.clone(),
+        output: sd,
+    };
+    let vars = VarMap::new();
+    let mlp = Mlp::seeded(&mlp_config, &vars, config.seed)?;
+    let mut opt = AdamW::new(
+        vars.all_vars(),
+        ParamsAdamW {
+            lr: config.learning_rate,
+            weight_decay: config.weight_decay,
+            ..Default::default()
+        },
+    )?;
+    // Loss of "no correction" in standardised target units: the zero change.
+    let zero = output.apply(&vec![0.0; sd]);
+    let zero = Tensor::from_vec(zero, (1, sd), &Device::Cpu)?;
+    let loss_before = y
+        .broadcast_sub(&zero)?
+        .sqr()?
+        .mean_all()?
+        .to_scalar::<f32>()? as f64;
+
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut order: Vec<u32> = (0..frames as u32).collect();
+    let mut cursor = frames;
+    let batch = config.batch_size.min(frames);
+    for it in 0..config.iterations {
+        if cursor + batch > frames {
+            order.shuffle(&mut rng);
+            cursor = 0;
+        }
+        let idx = Tensor::from_slice(&order[cursor..cursor + batch], batch, &Device::Cpu)?;
+        cursor += batch;
+        let pred = mlp.forward(&x.index_select(&idx, 0)?)?;
+        let loss = pred.sub(&y.index_select(&idx, 0)?)?.sqr()?.mean_all()?;
+        opt.backward_step(&loss)?;
+        if it % 500 == 0 {
+            tracing::debug!(it, loss = loss.to_scalar::<f32>()?, "debias step");
+        }
+    }
+    let loss_after = mlp
+        .forward(&x)?
+        .sub(&y)?
+        .sqr()?
+        .mean_all()?
+        .to_scalar::<f32>()? as f64;
+    let report = TrainReport {
+        pairs: pairs.len(),
+        frames,
+        iterations: config.iterations,
+        loss_before,
+        loss_after,
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    tracing::info!(loss_before, loss_after, frames, "debias trained");
+    let meta = Meta {
+        format: FORMAT,
+        joints,
+        fps,
+        mlp: mlp_config,
+        input,
+        output,
+        report: report.clone(),
+    };
+    Ok((Debiaser { meta, vars, mlp }, report))
+}
+
+impl Debiaser {
+    /// Joints of the skeleton the network was trained on.
+    pub fn joints(&self) -> usize {
+        self.meta.joints
+    }
+
+    /// Frame rate of the corrected clips it was trained on.
+    pub fn fps(&self) -> f64 {
+        self.meta.fps
+    }
+
+    pub fn report(&self) -> &TrainReport {
+        &self.meta.report
+    }
+
+    /// Debias a corrected clip (same skeleton layout and frame rate as training).
+    pub fn apply(&self, corrected: &Motion) -> Result<Motion> {
+        if corrected.joints() != self.meta.joints {
+            return Err(DebiasError::Data(format!(
+                "the clip has {} joints, the model was trained on {}",
+                corrected.joints(),
+                self.meta.joints
+            )));
+        }
+        let corrected = if (corrected.fps() - self.meta.fps).abs() > 1e-6 {
+            motion::resample::resample(corrected, self.meta.fps)?
+        } else {
+            corrected.clone()
+        };
+        let sd = state_dim(self.meta.joints);
+        let s = states(&corrected);
+        let frames = s.len() / sd;
+        let x = self.meta.input.apply(&inputs(&s, sd));
+        let x = Tensor::from_vec(x, (frames, 2 * sd), &Device::Cpu)?;
+        let delta = self.mlp.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
+        let delta = self.meta.output.invert(&delta);
+        let new: Vec<f32> = s.iter().zip(&delta).map(|(a, d)| a + d).collect();
+        Ok(apply_states(&corrected, &new)?)
+    }
+
+    /// Write `debias.safetensors` and `debias.json` into `dir` (created if missing).
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| DebiasError::Io { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let meta = serde_json::to_vec_pretty(&self.meta).map_err(|e| DebiasError::Model {
+            path: dir.join(META),
+            message: e.to_string(),
+        })?;
+        let tmp = dir.join(format!("{WEIGHTS}.tmp"));
+        self.vars.save(&tmp)?;
+        std::fs::rename(&tmp, dir.join(WEIGHTS)).map_err(io(&dir.join(WEIGHTS)))?;
+        motion::io::write_atomic(&dir.join(META), &meta)?;
+        Ok(())
+    }
+
+    /// Load a model written by [`Debiaser::save`].
+    pub fn load(dir: &Path) -> Result<Debiaser> {
+        let meta_path = dir.join(META);
+        let bytes = std::fs::read(&meta_path).map_err(|source| DebiasError::Io {
+            path: meta_path.clone(),
+            source,
+        })?;
+        let meta: Meta = serde_json::from_slice(&bytes).map_err(|e| DebiasError::Model {
+            path: meta_path.clone(),
+            message: e.to_string(),
+        })?;
+        if meta.format != FORMAT {
+            return Err(DebiasError::Model {
+                path: meta_path,
+                message: format!("format {} (this build reads {FORMAT})", meta.format),
+            });
+        }
+        let mut vars = VarMap::new();
+        let mlp = Mlp::new(
+            &meta.mlp,
+            VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu),
+        )?;
+        let weights = dir.join(WEIGHTS);
+        vars.load(&weights).map_err(|e| DebiasError::Model {
+            path: weights,
+            message: e.to_string(),
+        })?;
+        Ok(Debiaser { meta, vars, mlp })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::tests::walk;
+    use motion::glam::{DQuat, DVec3};
+
+    /// `m` with a systematic bias: root 4 cm lower, joint 3 bent by 0.2 rad.
+    fn biased(m: &Motion) -> Motion {
+        let nj = m.joints();
+        let root = m
+            .root_translation()
+            .iter()
+            .map(|p| *p - DVec3::Y * 0.04)
+            .collect();
+        let mut rot = m.rotations().to_vec();
+        for t in 0..m.frames() {
+            rot[t * nj + 3] *= DQuat::from_rotation_x(0.2);
+        }
+        m.with_frames(m.fps(), root, rot).expect("motion")
+    }
+
+    fn error(a: &Motion, b: &Motion) -> f64 {
+        let mut e = 0.0;
+        for t in 0..a.frames() {
+            e += (a.root_translation()[t].y - b.root_translation()[t].y).abs();
+            e += motion::rotation::angle_between(a.rotation(t, 3), b.rotation(t, 3));
+        }
+        e / a.frames() as f64
+    }
+
+    fn tiny() -> TrainConfig {
+        TrainConfig {
+            hidden: vec![64, 64],
+            iterations: 400,
+            batch_size: 40,
+            ..TrainConfig::default()
+        }
+    }
+
+    #[test]
+    fn learns_a_systematic_bias_and_removes_it() {
+        let original = walk();
+        let corrected = biased(&original);
+        let (model, report) =
+            train(&[(corrected.clone(), original.clone())], &tiny()).expect("train");
+        assert!(report.loss_after < 0.1 * report.loss_before, "{report:?}");
+        let before = error(&corrected, &original);
+        let after = error(&model.apply(&corrected).expect("apply"), &original);
+        assert!(after < 0.2 * before, "error {before} -> {after}");
+    }
+
+    #[test]
+    fn save_load_round_trip_gives_the_same_output() {
+        let original = walk();
+        let corrected = biased(&original);
+        let config = TrainConfig {
+            iterations: 5,
+            ..tiny()
+        };
+        let (model, _) = train(&[(corrected.clone(), original)], &config).expect("train");
+        let dir = tempfile::tempdir().expect("tempdir");
+        model.save(dir.path()).expect("save");
+        let loaded = Debiaser::load(dir.path()).expect("load");
+        let (a, b) = (
+            model.apply(&corrected).expect("apply"),
+            loaded.apply(&corrected).expect("apply"),
+        );
+        assert_eq!(a.rotations(), b.rotations());
+        assert_eq!(a.root_translation(), b.root_translation());
+    }
+
+    #[test]
+    fn training_is_reproducible() {
+        let original = walk();
+        let corrected = biased(&original);
+        let config = TrainConfig {
+            iterations: 20,
+            ..tiny()
+        };
+        let pairs = [(corrected.clone(), original)];
+        let (a, _) = train(&pairs, &config).expect("train");
+        let (b, _) = train(&pairs, &config).expect("train");
+        let (a, b) = (
+            a.apply(&corrected).expect("apply"),
+            b.apply(&corrected).expect("apply"),
+        );
+        assert_eq!(a.rotations(), b.rotations());
+    }
+
+    #[test]
+    fn refuses_bad_input() {
+        let original = walk();
+        assert!(matches!(train(&[], &tiny()), Err(DebiasError::Data(_))));
+        let bad = TrainConfig {
+            iterations: 0,
+            ..tiny()
+        };
+        assert!(matches!(
+            train(&[(original.clone(), original.clone())], &bad),
+            Err(DebiasError::Config(_))
+        ));
+        let dir = tempfile::tempdir().expect("tempdir");
+        assert!(matches!(
+            Debiaser::load(dir.path()),
+            Err(DebiasError::Io { .. })
+        ));
+    }
+}

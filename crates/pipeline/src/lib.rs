@@ -1,0 +1,48 @@
+//! The whole augmentation: a recipe ([`recipe`]) becomes a graph of per-clip
+//! jobs ([`plan`]); each job kind is one function ([`stages`]); [`run`] walks
+//! the graph in one process (the CLI, evaluation), while the service stores
+//! the same graph in Postgres and hands its jobs to workers that call the same
+//! stage functions.
+
+pub mod manifest;
+pub mod plan;
+pub mod recipe;
+pub mod run;
+pub mod stages;
+
+pub use manifest::{CorrectionSummary, ManifestEntry};
+pub use plan::{JobKind, Plan, PlannedJob, plan};
+pub use recipe::{CorrectStep, InteractionStep, Recipe, ResidualKind, VaeStep};
+pub use run::{Clip, Event, Options, Output, Summary, run};
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("recipe: {location}: {message}")]
+    Recipe { location: String, message: String },
+    #[error("{path}: {source}")]
+    InFile {
+        path: std::path::PathBuf,
+        #[source]
+        source: Box<PipelineError>,
+    },
+    #[error("{path}: {source}")]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Motion(#[from] motion::MotionError),
+    #[error(transparent)]
+    Synth(#[from] synth::SynthError),
+    #[error(transparent)]
+    Vae(#[from] vae::VaeError),
+    #[error(transparent)]
+    Interaction(#[from] interaction::InteractionError),
+    #[error(transparent)]
+    Correct(#[from] correct::CorrectError),
+    #[error(transparent)]
+    Debias(#[from] debias::DebiasError),
+    #[error("{0}")]
+    Job(String),
+}

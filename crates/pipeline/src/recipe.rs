@@ -1,0 +1,398 @@
+//! The full recipe: the kinematic `[[ops]]` of [`synth::Recipe`] plus the
+//! tables that make new clips from the whole dataset (`[vae]`, `[interaction]`)
+//! and the tables that post-process every new clip (`[correct]`, `[debias]`).
+//!
+//! ```toml
+//! seed = 7
+//!
+//! [[ops]]                   # per clip, see synth::Recipe
+//! op = "ik"
+//! copies = 4
+//! preset = "kick"
+//!
+//! [vae]                     # one VAE per class of the dataset, sampled `copies` times
+//! copies = 10
+//! iterations = 1500
+//! prior = "near"            # near | normal
+//!
+//! [interaction]             # every pair <stem>_A / <stem>_B: `copies` body-size variations of B
+//! copies = 4
+//! scale_min = 0.75
+//! scale_max = 1.25
+//!
+//! [correct]                 # every new clip through physical correction
+//! time_budget_s = 300
+//! residual = "pd"           # pd | none | learned
+//! keep_rejected = false
+//!
+//! [debias]                  # learn (corrected original -> original), apply to corrected clips
+//! iterations = 2000
+//! ```
+//!
+//! The same structure is accepted as JSON by the HTTP service. Unknown keys are
+//! errors naming the table and the field; every table is optional but a recipe
+//! must make something (`[[ops]]`, `[vae]` or `[interaction]`), and `[debias]`
+//! needs `[correct]`.
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::PipelineError;
+
+/// `[vae]`: train the motion VAE on the dataset's clips of each class, then sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VaeStep {
+    /// Samples per class.
+    pub copies: u32,
+    /// `class`: one model per HDM05 class (the class part of `HDM_<actor>_<class>_<n>`,
+    /// else the whole name without trailing digits); `all`: one model for the dataset.
+    pub group_by: GroupBy,
+    pub iterations: u64,
+    pub prior: vae::Prior,
+    pub adversarial: bool,
+    /// Classes with fewer clips than this are skipped (a VAE of one clip only copies it).
+    pub min_clips: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GroupBy {
+    Class,
+    All,
+}
+
+impl Default for VaeStep {
+    fn default() -> Self {
+        VaeStep {
+            copies: 10,
+            group_by: GroupBy::Class,
+            iterations: 1500,
+            prior: vae::Prior::Near,
+            adversarial: true,
+            min_clips: 2,
+        }
+    }
+}
+
+/// `[interaction]`: body-size variations of every two-person pair.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InteractionStep {
+    /// Variations per pair.
+    pub copies: u32,
+    pub scale_min: f64,
+    pub scale_max: f64,
+    /// Relative per-bone jitter on top of the global factor.
+    pub bone_jitter: f64,
+    /// Evenly spaced factors instead of random ones.
+    pub grid: bool,
+}
+
+impl Default for InteractionStep {
+    fn default() -> Self {
+        InteractionStep {
+            copies: 4,
+            scale_min: 0.75,
+            scale_max: 1.25,
+            bone_jitter: 0.0,
+            grid: false,
+        }
+    }
+}
+
+/// `[correct]`: physical correction of every new clip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CorrectStep {
+    /// Training budget per clip, seconds.
+    pub time_budget_s: f64,
+    pub residual: ResidualKind,
+    /// Stop a clip's training once its rollout reaches this R_norm (and is accepted).
+    pub target_r_norm: f64,
+    /// Mean per-step reward a corrected clip needs to be kept (paper: 0.7).
+    pub accept_threshold: f64,
+    /// Keep clips whose correction was not accepted (marked in the manifest).
+    pub keep_rejected: bool,
+    /// Correct each original first and start its variants from its policy.
+    pub warm_start: bool,
+    /// Parallel simulated environments per clip.
+    pub envs: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualKind {
+    Pd,
+    None,
+    Learned,
+}
+
+impl ResidualKind {
+    pub fn physics(self) -> physics::Residual {
+        match self {
+            ResidualKind::Pd => physics::Residual::Pd,
+            ResidualKind::None => physics::Residual::None,
+            ResidualKind::Learned => physics::Residual::Learned,
+        }
+    }
+}
+
+impl Default for CorrectStep {
+    fn default() -> Self {
+        let c = correct::CorrectConfig::default();
+        CorrectStep {
+            time_budget_s: c.time_budget_s,
+            residual: ResidualKind::Pd,
+            target_r_norm: c.target_r_norm.unwrap_or(0.8),
+            accept_threshold: c.accept_threshold,
+            keep_rejected: false,
+            warm_start: true,
+            envs: c.envs,
+        }
+    }
+}
+
+impl CorrectStep {
+    /// The correction job's settings for one clip.
+    pub fn config(&self, seed: u64) -> correct::CorrectConfig {
+        let mut c = correct::CorrectConfig {
+            time_budget_s: self.time_budget_s,
+            target_r_norm: Some(self.target_r_norm),
+            accept_threshold: self.accept_threshold,
+            envs: self.envs,
+            seed,
+            ..correct::CorrectConfig::default()
+        };
+        c.physics.residual = self.residual.physics();
+        c
+    }
+}
+
+/// A validated recipe.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Recipe {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// The `[[ops]]` (kinematic synthesis per clip), when there are any.
+    #[serde(skip)]
+    pub synth: Option<synth::Recipe>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vae: Option<VaeStep>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interaction: Option<InteractionStep>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub correct: Option<CorrectStep>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub debias: Option<debias::TrainConfig>,
+}
+
+impl<'de> Deserialize<'de> for Recipe {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let v = Value::deserialize(d)?;
+        Recipe::from_value(v).map_err(serde::de::Error::custom)
+    }
+}
+
+fn err(location: impl Into<String>, message: impl Into<String>) -> PipelineError {
+    PipelineError::Recipe {
+        location: location.into(),
+        message: message.into(),
+    }
+}
+
+/// Deserialise one table, naming it in the error.
+fn table<T: serde::de::DeserializeOwned>(name: &str, v: Value) -> Result<T, PipelineError> {
+    if !v.is_object() {
+        return Err(err(format!("[{name}]"), "must be a table/object"));
+    }
+    serde_json::from_value(v).map_err(|e| err(format!("[{name}]"), e.to_string()))
+}
+
+impl Recipe {
+    pub const TABLES: &[&str] = &["seed", "ops", "vae", "interaction", "correct", "debias"];
+
+    pub fn from_toml_str(text: &str) -> Result<Recipe, PipelineError> {
+        let v: Value = toml::from_str(text).map_err(|e| err("TOML", e.to_string()))?;
+        Recipe::from_value(v)
+    }
+
+    pub fn from_json_str(text: &str) -> Result<Recipe, PipelineError> {
+        let v: Value = serde_json::from_str(text).map_err(|e| err("JSON", e.to_string()))?;
+        Recipe::from_value(v)
+    }
+
+    /// Read a recipe file: JSON when it ends in `.json`, TOML otherwise.
+    pub fn from_file(path: &std::path::Path) -> Result<Recipe, PipelineError> {
+        let text = std::fs::read_to_string(path).map_err(|source| PipelineError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let parsed = if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+        {
+            Recipe::from_json_str(&text)
+        } else {
+            Recipe::from_toml_str(&text)
+        };
+        parsed.map_err(|e| PipelineError::InFile {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        })
+    }
+
+    /// Parse the generic structure shared by TOML and JSON.
+    pub fn from_value(v: Value) -> Result<Recipe, PipelineError> {
+        let Value::Object(mut top) = v else {
+            return Err(err("recipe", "must be a table/object"));
+        };
+        if let Some(unknown) = top.keys().find(|k| !Self::TABLES.contains(&k.as_str())) {
+            return Err(err(
+                "recipe",
+                format!(
+                    "unknown key `{unknown}` (known: {})",
+                    Self::TABLES.join(", ")
+                ),
+            ));
+        }
+        let vae = top.remove("vae").map(|v| table("vae", v)).transpose()?;
+        let interaction = top
+            .remove("interaction")
+            .map(|v| table("interaction", v))
+            .transpose()?;
+        let correct = top
+            .remove("correct")
+            .map(|v| table("correct", v))
+            .transpose()?;
+        let debias = top
+            .remove("debias")
+            .map(|v| table("debias", v))
+            .transpose()?;
+        let seed = match top.get("seed") {
+            None => None,
+            Some(s) => Some(
+                s.as_u64()
+                    .ok_or_else(|| err("seed", "must be a non-negative integer below 2^64"))?,
+            ),
+        };
+        let synth = if top.contains_key("ops") {
+            Some(
+                synth::Recipe::from_value(Value::Object(top)).map_err(|e| match e {
+                    synth::SynthError::Recipe { location, message } => err(location, message),
+                    other => err("ops", other.to_string()),
+                })?,
+            )
+        } else {
+            None
+        };
+        Recipe {
+            seed,
+            synth,
+            vae,
+            interaction,
+            correct,
+            debias,
+        }
+        .validated()
+    }
+
+    fn validated(self) -> Result<Recipe, PipelineError> {
+        if self.synth.is_none() && self.vae.is_none() && self.interaction.is_none() {
+            return Err(err(
+                "recipe",
+                "makes nothing: add [[ops]] tables, a [vae] table or an [interaction] table",
+            ));
+        }
+        if self.debias.is_some() && self.correct.is_none() {
+            return Err(err(
+                "[debias]",
+                "needs a [correct] table (it learns from corrected originals)",
+            ));
+        }
+        if let Some(v) = &self.vae {
+            if !(1..=synth::recipe::MAX_COPIES).contains(&v.copies) {
+                return Err(err(
+                    "[vae]",
+                    format!("`copies` must be in 1..={}", synth::recipe::MAX_COPIES),
+                ));
+            }
+            if v.iterations == 0 {
+                return Err(err("[vae]", "`iterations` must be at least 1"));
+            }
+            if v.min_clips == 0 {
+                return Err(err("[vae]", "`min_clips` must be at least 1"));
+            }
+        }
+        if let Some(i) = &self.interaction {
+            if !(1..=synth::recipe::MAX_COPIES).contains(&i.copies) {
+                return Err(err(
+                    "[interaction]",
+                    format!("`copies` must be in 1..={}", synth::recipe::MAX_COPIES),
+                ));
+            }
+            self.interaction_spec(0)
+                .map(|s| s.validate())
+                .transpose()
+                .map_err(|e| err("[interaction]", e.to_string()))?;
+        }
+        if let Some(c) = &self.correct {
+            if !(c.time_budget_s.is_finite() && c.time_budget_s >= 0.0) {
+                return Err(err(
+                    "[correct]",
+                    "`time_budget_s` must be a duration in seconds",
+                ));
+            }
+            for (name, v) in [
+                ("target_r_norm", c.target_r_norm),
+                ("accept_threshold", c.accept_threshold),
+            ] {
+                if !(0.0..=1.0).contains(&v) {
+                    return Err(err("[correct]", format!("`{name}` must be in [0, 1]")));
+                }
+            }
+            c.config(0)
+                .validate()
+                .map_err(|e| err("[correct]", e.to_string()))?;
+        }
+        if let Some(d) = &self.debias {
+            d.validate().map_err(|e| err("[debias]", e.to_string()))?;
+        }
+        Ok(self)
+    }
+
+    /// The seed to use: the caller's, else the recipe's, else 0.
+    pub fn effective_seed(&self, override_seed: Option<u64>) -> u64 {
+        override_seed.or(self.seed).unwrap_or(0)
+    }
+
+    /// The interaction variations of one pair, drawn with `seed`.
+    pub fn interaction_spec(&self, seed: u64) -> Option<interaction::VariationSpec> {
+        self.interaction
+            .as_ref()
+            .map(|i| interaction::VariationSpec {
+                count: i.copies as usize,
+                scale_min: i.scale_min,
+                scale_max: i.scale_max,
+                bone_jitter: i.bone_jitter,
+                grid: i.grid,
+                seed,
+            })
+    }
+
+    /// The recipe as the JSON object it was read from (with defaults filled in).
+    pub fn to_value(&self) -> Value {
+        let mut m = match serde_json::to_value(self) {
+            Ok(Value::Object(m)) => m,
+            _ => Map::new(),
+        };
+        if let Some(s) = &self.synth
+            && let Ok(Value::Object(ops)) = serde_json::to_value(s)
+        {
+            for (k, v) in ops {
+                m.insert(k, v);
+            }
+        }
+        Value::Object(m)
+    }
+}

@@ -1,0 +1,289 @@
+//! One function per job kind: what a job does, given its inputs in memory.
+//! The in-process runner ([`crate::run`]) and the service's worker both call
+//! these, so a clip is made the same way wherever it runs.
+
+use std::path::Path;
+
+use motion::Motion;
+use serde_json::{Map, Value, json};
+
+use crate::PipelineError;
+use crate::recipe::{CorrectStep, InteractionStep, Recipe, VaeStep};
+
+/// A clip a job made, with its manifest entry.
+#[derive(Debug, Clone)]
+pub struct NewClip {
+    pub name: String,
+    pub motion: Motion,
+    pub mask: Option<synth::Mask>,
+    pub entry: synth::ManifestEntry,
+}
+
+/// A manifest entry for an output of a dataset-level job (its own fields set by the caller).
+fn entry(name: &str, motion: &Motion) -> synth::ManifestEntry {
+    synth::ManifestEntry {
+        file: format!("{name}.bvh"),
+        source: String::new(),
+        op: String::new(),
+        op_index: 0,
+        copy: 0,
+        seed: 0,
+        params: Value::Null,
+        sampled: Map::new(),
+        frames: motion.frames(),
+        fps: motion.fps(),
+        effector: None,
+        keyframe: None,
+        target: None,
+    }
+}
+
+/// `synthesize`: one kinematic op output of one clip.
+pub fn synthesize(
+    recipe: &Recipe,
+    clip: &str,
+    source: &str,
+    motion: &Motion,
+    job: synth::Job,
+) -> Result<NewClip, PipelineError> {
+    let synth = recipe
+        .synth
+        .as_ref()
+        .ok_or_else(|| PipelineError::Job("the recipe has no [[ops]]".into()))?;
+    let generated = synth::run_job(synth, clip, motion, job)?;
+    let entry = generated.manifest_entry(format!("{}.bvh", generated.name), source);
+    Ok(NewClip {
+        name: generated.name,
+        motion: generated.output.motion,
+        mask: generated.output.mask,
+        entry,
+    })
+}
+
+/// Index in the manifest of the `[vae]` table's outputs: after the `[[ops]]`.
+pub fn vae_op_index(recipe: &Recipe) -> usize {
+    recipe.synth.as_ref().map_or(0, |s| s.ops.len())
+}
+
+/// Index in the manifest of the `[interaction]` table's outputs.
+pub fn interaction_op_index(recipe: &Recipe) -> usize {
+    vae_op_index(recipe) + 1
+}
+
+/// `vae`: train the motion VAE on a class's clips, then sample `copies` clips.
+pub fn vae(
+    recipe: &Recipe,
+    step: &VaeStep,
+    group: &str,
+    clips: &[(String, Motion)],
+    seed: u64,
+) -> Result<Vec<NewClip>, PipelineError> {
+    let span = tracing::info_span!("vae_job", group, clips = clips.len());
+    let _guard = span.enter();
+    let config = vae::TrainConfig {
+        iterations: step.iterations,
+        adversarial: step.adversarial,
+        seed,
+        ..vae::TrainConfig::default()
+    };
+    let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
+    let model = vae::train(&motions, &config, |_| {})?;
+    let samples = model.sample(step.copies as usize, step.prior, seed)?;
+    let names = crate::plan::vae_outputs(group, step.copies);
+    let sources: Vec<Value> = clips.iter().map(|(n, _)| json!(n)).collect();
+    let params = serde_json::to_value(step).unwrap_or(Value::Null);
+    let op_index = vae_op_index(recipe);
+    Ok(samples
+        .into_iter()
+        .zip(names)
+        .enumerate()
+        .map(|(copy, (sample, name))| {
+            let mut sampled = Map::new();
+            sampled.insert("clips".into(), Value::Array(sources.clone()));
+            let e = synth::ManifestEntry {
+                source: group.to_string(),
+                op: "vae".into(),
+                op_index,
+                copy: copy as u32,
+                seed,
+                params: params.clone(),
+                sampled,
+                ..entry(&name, &sample.motion)
+            };
+            NewClip {
+                name,
+                motion: sample.motion,
+                mask: None,
+                entry: e,
+            }
+        })
+        .collect())
+}
+
+/// `interaction`: body-size variations of partner B, both partners adapted.
+pub fn interaction(
+    recipe: &Recipe,
+    step: &InteractionStep,
+    stem: &str,
+    a: &Motion,
+    b: &Motion,
+    seed: u64,
+) -> Result<Vec<NewClip>, PipelineError> {
+    let span = tracing::info_span!("interaction_job", pair = stem);
+    let _guard = span.enter();
+    let spec = recipe
+        .interaction_spec(seed)
+        .ok_or_else(|| PipelineError::Job("the recipe has no [interaction]".into()))?;
+    let variations =
+        interaction::variations(a, b, &spec, &interaction::RetargetOptions::default())?;
+    let params = serde_json::to_value(step).unwrap_or(Value::Null);
+    let op_index = interaction_op_index(recipe);
+    let names = crate::plan::interaction_outputs(stem, step.copies);
+    let mut out = Vec::with_capacity(names.len());
+    for (v, names) in variations.into_iter().zip(names.chunks(2)) {
+        let report = serde_json::to_value(&v.result.report).unwrap_or(Value::Null);
+        for (name, motion, side) in [(&names[0], v.result.a, "A"), (&names[1], v.result.b, "B")] {
+            let mut sampled = Map::new();
+            sampled.insert("partner".into(), json!(side));
+            sampled.insert("scale".into(), json!(v.scale.default));
+            sampled.insert("report".into(), report.clone());
+            let e = synth::ManifestEntry {
+                source: stem.to_string(),
+                op: "interaction".into(),
+                op_index,
+                copy: v.index as u32,
+                seed,
+                params: params.clone(),
+                sampled,
+                ..entry(name, &motion)
+            };
+            out.push(NewClip {
+                name: name.clone(),
+                motion,
+                mask: None,
+                entry: e,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// `correct` / `correct_original`: physical correction of one clip in `dir`
+/// (checkpoints, report, corrected clip). A finished correction in `dir` is
+/// reused; checkpoints of an interrupted one are resumed.
+pub fn correct(
+    step: &CorrectStep,
+    name: &str,
+    motion: &Motion,
+    seed: u64,
+    dir: &Path,
+    warm_start: Option<&Path>,
+    on_progress: impl FnMut(&correct::job::ProgressEvent),
+) -> Result<correct::Outcome, PipelineError> {
+    if let Some(done) = finished_correction(motion, dir)? {
+        tracing::info!(clip = name, "correction already finished; reused");
+        return Ok(done);
+    }
+    let mut config = step.config(seed);
+    config.warm_start = warm_start
+        .filter(|d| ppo::latest_checkpoint(d).ok().flatten().is_some())
+        .map(Path::to_path_buf);
+    let resume = ppo::latest_checkpoint(&dir.join("checkpoints"))
+        .map_err(correct::CorrectError::from)?
+        .is_some();
+    let outcome = correct::correct(motion, name, &config, dir, resume, on_progress)?;
+    write_exact(&dir.join(EXACT), &outcome.motion)?;
+    Ok(outcome)
+}
+
+/// The corrected clip in full f64 precision (the BVH and NPZ outputs round),
+/// so a reused correction gives bit-identical results downstream.
+const EXACT: &str = "corrected.exact.npz";
+
+fn write_exact(path: &Path, m: &Motion) -> Result<(), PipelineError> {
+    let io = |source| PipelineError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let root: Vec<f64> = m
+        .root_translation()
+        .iter()
+        .flat_map(|p| [p.x, p.y, p.z])
+        .collect();
+    let rot: Vec<f64> = m
+        .rotations()
+        .iter()
+        .flat_map(|q| [q.w, q.x, q.y, q.z])
+        .collect();
+    let bytes = motion::npz::NpzWriter::new(std::io::Cursor::new(Vec::new()))
+        .array_f64("root_translation", &[m.frames(), 3], &root)
+        .and_then(|w| w.array_f64("rotations", &[m.frames(), m.joints(), 4], &rot))
+        .and_then(|w| w.scalar_f64("fps", m.fps()))
+        .and_then(|w| w.finish())
+        .map_err(io)?
+        .into_inner();
+    Ok(motion::io::write_atomic(path, &bytes)?)
+}
+
+fn read_exact(path: &Path, source: &Motion) -> Result<Motion, PipelineError> {
+    let bad = |what: &str| PipelineError::Job(format!("{}: {what}", path.display()));
+    let bytes = std::fs::read(path).map_err(|e| PipelineError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    let arrays = motion::npz::read(&bytes).map_err(|e| bad(&e.to_string()))?;
+    let get = |name: &str| {
+        arrays
+            .iter()
+            .find(|a| a.name == name)
+            .and_then(|a| a.to_f64())
+            .ok_or_else(|| bad(&format!("no float64 array `{name}`")))
+    };
+    let (root, rot, fps) = (get("root_translation")?, get("rotations")?, get("fps")?);
+    let root = root
+        .chunks_exact(3)
+        .map(|p| motion::glam::DVec3::new(p[0], p[1], p[2]))
+        .collect();
+    let rot = rot
+        .chunks_exact(4)
+        .map(|q| motion::glam::DQuat::from_xyzw(q[1], q[2], q[3], q[0]))
+        .collect();
+    let fps = *fps.first().ok_or_else(|| bad("empty fps"))?;
+    Ok(source.with_frames(fps, root, rot)?)
+}
+
+/// The outcome of a correction that already finished in `dir`, if there is one.
+pub fn finished_correction(
+    motion: &Motion,
+    dir: &Path,
+) -> Result<Option<correct::Outcome>, PipelineError> {
+    let (report_path, exact) = (dir.join("report.json"), dir.join(EXACT));
+    if !(report_path.is_file() && exact.is_file()) {
+        return Ok(None);
+    }
+    let report: correct::Report =
+        serde_json::from_slice(&std::fs::read(&report_path).map_err(|source| {
+            PipelineError::Io {
+                path: report_path.clone(),
+                source,
+            }
+        })?)
+        .map_err(|e| PipelineError::Job(format!("{}: {e}", report_path.display())))?;
+    Ok(Some(correct::Outcome {
+        motion: read_exact(&exact, motion)?,
+        report,
+    }))
+}
+
+/// `debias_train`: fit the debiasing network on (corrected original, original) pairs.
+pub fn debias_train(
+    config: &debias::TrainConfig,
+    pairs: &[(Motion, Motion)],
+) -> Result<debias::Debiaser, PipelineError> {
+    Ok(debias::train(pairs, config)?.0)
+}
+
+/// `debias_apply`: remove the learned bias from a corrected clip.
+pub fn debias_apply(model: &debias::Debiaser, corrected: &Motion) -> Result<Motion, PipelineError> {
+    Ok(model.apply(corrected)?)
+}

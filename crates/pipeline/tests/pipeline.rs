@@ -1,0 +1,303 @@
+//! The pipeline end to end on the bundled clips: recipe validation, the job
+//! graph, and in-process runs with correction, debiasing and the VAE.
+
+use std::path::PathBuf;
+
+use pipeline::{Clip, Event, JobKind, Options, Recipe, plan, run};
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/data")).join(name)
+}
+
+fn kick() -> Clip {
+    let options = motion::io::LoadOptions {
+        skeleton: Some(data("HDM_bd.asf")),
+        ..Default::default()
+    };
+    Clip {
+        name: "HDM_bd_kickLFront1Reps_001_120".into(),
+        source: "kick.amc".into(),
+        motion: motion::io::load(data("HDM_bd_kickLFront1Reps_001_120.amc"), &options)
+            .expect("bundled clip"),
+    }
+}
+
+fn quiet(_: Event<'_>) {}
+
+fn recipe_err(text: &str) -> String {
+    match Recipe::from_toml_str(text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn recipes_are_validated_with_the_table_and_field_named() {
+    let full = Recipe::from_toml_str(
+        r#"
+        seed = 3
+        [[ops]]
+        op = "noise"
+        copies = 2
+        [vae]
+        copies = 4
+        prior = "normal"
+        [interaction]
+        copies = 2
+        [correct]
+        time_budget_s = 30
+        residual = "none"
+        [debias]
+        iterations = 10
+        "#,
+    )
+    .expect("full recipe");
+    assert_eq!(full.seed, Some(3));
+    assert_eq!(full.vae.as_ref().map(|v| v.copies), Some(4));
+    assert_eq!(
+        full.correct.as_ref().map(|c| c.residual),
+        Some(pipeline::ResidualKind::None)
+    );
+    // JSON with the same structure is the same recipe.
+    let json = Recipe::from_value(full.to_value()).expect("round trip");
+    assert_eq!(json, full);
+
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\ntime_budget = 3\n");
+    assert!(e.contains("[correct]") && e.contains("time_budget"), "{e}");
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[debias]\niterations = 3\n");
+    assert!(e.contains("[debias]") && e.contains("[correct]"), "{e}");
+    let e = recipe_err("[correct]\n");
+    assert!(e.contains("makes nothing"), "{e}");
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[corect]\n");
+    assert!(e.contains("unknown key `corect`"), "{e}");
+    let e = recipe_err("[[ops]]\nop = \"noise\"\nsigma_deg = -1\n");
+    assert!(e.contains("ops[0]"), "{e}");
+    let e = recipe_err("[interaction]\nscale_min = 0.1\n");
+    assert!(
+        e.contains("[interaction]") && e.contains("scale_min"),
+        "{e}"
+    );
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\naccept_threshold = 2\n");
+    assert!(e.contains("accept_threshold"), "{e}");
+}
+
+#[test]
+fn the_plan_orders_jobs_after_their_inputs() {
+    let recipe = Recipe::from_toml_str(
+        r#"
+        [[ops]]
+        op = "mirror"
+        [vae]
+        copies = 2
+        [interaction]
+        copies = 1
+        [correct]
+        [debias]
+        "#,
+    )
+    .expect("recipe");
+    let names: Vec<String> = [
+        "HDM_bd_kickLFront1Reps_001_120",
+        "HDM_bk_kickLFront1Reps_002_120",
+        "18_01_shake_A",
+        "18_01_shake_B",
+    ]
+    .map(String::from)
+    .to_vec();
+    let plan = plan(&recipe, &names, 0);
+    let position = |key: &str| {
+        plan.jobs
+            .iter()
+            .position(|j| j.key == key)
+            .unwrap_or_else(|| panic!("no job {key}"))
+    };
+    for (i, job) in plan.jobs.iter().enumerate() {
+        for dep in &job.deps {
+            assert!(
+                position(dep) < i,
+                "{} needs {dep}, which comes later",
+                job.key
+            );
+        }
+    }
+    // One VAE for the kick class (both actors), none for the single pair clips.
+    let vae: Vec<_> = plan
+        .jobs
+        .iter()
+        .filter(|j| matches!(j.kind, JobKind::Vae { .. }))
+        .collect();
+    assert_eq!(vae.len(), 1, "{vae:?}");
+    assert_eq!(
+        vae[0].outputs,
+        ["kickLFront1Reps__vae_000", "kickLFront1Reps__vae_001"]
+    );
+    // The pair is found; its outputs are not simulated (two partners, one world).
+    let inter = position("interaction:18_01_shake");
+    assert_eq!(plan.jobs[inter].outputs.len(), 2);
+    assert!(
+        !plan
+            .jobs
+            .iter()
+            .any(|j| j.key == "correct:18_01_shake__interaction_000_A")
+    );
+    // Variants warm-start from their original's correction; debiasing needs all originals.
+    let c = &plan.jobs[position("correct:HDM_bd_kickLFront1Reps_001_120__00_mirror_000")];
+    assert!(
+        c.deps
+            .contains(&"correct_original:HDM_bd_kickLFront1Reps_001_120".to_string())
+    );
+    let train = &plan.jobs[position("debias_train")];
+    assert_eq!(train.deps.len(), names.len());
+    let apply = &plan.jobs[position("debias_apply:kickLFront1Reps__vae_001")];
+    assert_eq!(
+        apply.deps,
+        ["correct:kickLFront1Reps__vae_001", "debias_train"]
+    );
+}
+
+const CORRECTED: &str = r#"
+    seed = 5
+    [[ops]]
+    op = "noise"
+    sigma_deg = 1.0
+    copies = 2
+    [correct]
+    time_budget_s = 1
+    target_r_norm = 0.0
+    accept_threshold = 0.0
+    envs = 2
+    [debias]
+    hidden = [32]
+    iterations = 20
+"#;
+
+#[test]
+fn correction_and_debiasing_run_in_process_and_survive_a_rerun() {
+    let recipe = Recipe::from_toml_str(CORRECTED).expect("recipe");
+    let clips = [kick()];
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&out).expect("mkdir");
+    let work = out.join("work");
+    let options = Options {
+        out: Some(&out),
+        work: &work,
+        seed: 5,
+        on_event: &quiet,
+    };
+    let summary = run(&recipe, &clips, &options).expect("run");
+    assert!(summary.failures.is_empty(), "{:?}", summary.failures);
+    assert_eq!(summary.manifest.len(), 2);
+    for e in &summary.manifest {
+        let c = e.correction.as_ref().expect("correction summary");
+        assert!(c.accepted && c.samples > 0, "{c:?}");
+        assert!(e.debiased);
+        assert_eq!(e.synth.fps, 30.0, "corrected clips are at the control rate");
+        let bvh = out.join(&e.synth.file);
+        let m = motion::bvh::read(&bvh, motion::Unit::Auto).expect("output BVH");
+        assert_eq!(m.frames(), e.synth.frames);
+        assert!(
+            work.join("correct")
+                .join(e.synth.file.trim_end_matches(".bvh"))
+                .join("report.json")
+                .is_file()
+        );
+    }
+    assert!(
+        work.join("originals/HDM_bd_kickLFront1Reps_001_120/report.json")
+            .is_file()
+    );
+    assert!(work.join("debias/debias.json").is_file());
+    let manifest = std::fs::read(out.join("manifest.json")).expect("manifest");
+
+    // A rerun finds every correction finished and writes the same files.
+    let corrected = out.join(&summary.manifest[0].synth.file);
+    let before = std::fs::read(&corrected).expect("output");
+    let started = std::time::Instant::now();
+    let again = run(&recipe, &clips, &options).expect("rerun");
+    assert!(again.failures.is_empty());
+    assert!(
+        started.elapsed().as_secs_f64() < 3.0,
+        "rerun retrained: {:?}",
+        started.elapsed()
+    );
+    assert!(
+        std::fs::read(&corrected).expect("output") == before,
+        "output changed"
+    );
+    assert!(
+        std::fs::read(out.join("manifest.json")).expect("manifest") == manifest,
+        "manifest changed"
+    );
+}
+
+#[test]
+fn rejected_corrections_are_left_out_unless_kept() {
+    let text = CORRECTED
+        .replace("accept_threshold = 0.0", "accept_threshold = 1.0")
+        .replace("[debias]\n    hidden = [32]\n    iterations = 20\n", "");
+    let recipe = Recipe::from_toml_str(&text).expect("recipe");
+    let clips = [kick()];
+    let work = tempfile::tempdir().expect("tempdir");
+    let options = Options {
+        out: None,
+        work: work.path(),
+        seed: 5,
+        on_event: &quiet,
+    };
+    let summary = run(&recipe, &clips, &options).expect("run");
+    assert!(summary.outputs.is_empty());
+    assert_eq!(summary.rejected.len(), 2);
+
+    let kept =
+        Recipe::from_toml_str(&text.replace("envs = 2", "envs = 2\n    keep_rejected = true"))
+            .expect("recipe");
+    let summary = run(&kept, &clips, &options).expect("run");
+    assert_eq!(
+        summary.outputs.len(),
+        2,
+        "reused corrections, kept despite rejection"
+    );
+    assert!(
+        summary
+            .outputs
+            .iter()
+            .all(|o| o.entry.correction.as_ref().is_some_and(|c| !c.accepted))
+    );
+}
+
+#[test]
+fn vae_table_trains_per_class_and_samples() {
+    let recipe = Recipe::from_toml_str(
+        "[vae]\ncopies = 3\niterations = 2\nmin_clips = 1\nadversarial = false\n",
+    )
+    .expect("recipe");
+    let clips = [kick()];
+    let work = tempfile::tempdir().expect("tempdir");
+    let summary = run(
+        &recipe,
+        &clips,
+        &Options {
+            out: None,
+            work: work.path(),
+            seed: 1,
+            on_event: &quiet,
+        },
+    )
+    .expect("run");
+    assert!(summary.failures.is_empty(), "{:?}", summary.failures);
+    let names: Vec<_> = summary.outputs.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "kickLFront1Reps__vae_000",
+            "kickLFront1Reps__vae_001",
+            "kickLFront1Reps__vae_002"
+        ]
+    );
+    for o in &summary.outputs {
+        assert_eq!(o.entry.synth.op, "vae");
+        assert_eq!(o.motion.joints(), clips[0].motion.joints());
+        assert!(o.motion.frames() > 1);
+    }
+}
