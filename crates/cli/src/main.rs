@@ -41,6 +41,8 @@ enum Command {
     Bench(commands::bench::Args),
     /// Train the MotionAug motion VAE on a class, or sample clips from one.
     Vae(commands::vae::Args),
+    /// Evaluate augmentations: min DTW / MMD, and motion prediction with and without them.
+    Eval(commands::eval::Args),
 }
 
 fn main() -> ExitCode {
@@ -61,6 +63,7 @@ fn main() -> ExitCode {
         Command::Correct(args) => commands::correct::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Vae(args) => commands::vae::run(args),
+        Command::Eval(args) => commands::eval::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -255,3 +255,88 @@ fn bvh_examples_work_without_a_skeleton() {
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(v["fps"], 120.0);
 }
+
+/// HDM05 clips of all five actors (not bundled; the eval tests skip without it).
+const HDM05: &str = "../shared/data/hdm05";
+
+#[test]
+fn eval_predict_tiny_run_reports_both_conditions_per_horizon() {
+    if !root().join(HDM05).is_dir() {
+        eprintln!("note: {HDM05} is absent; skipping the eval predict test");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = dir.path().join("noise.toml");
+    std::fs::write(
+        &recipe,
+        "seed = 3\n[[ops]]\nop = \"noise\"\nsigma_deg = 2.0\n",
+    )
+    .unwrap();
+    let text = ok(motionaug(&[
+        "eval",
+        "predict",
+        "--data",
+        HDM05,
+        "--class",
+        "SNEAK",
+        "--test-actor",
+        "bk",
+        "--model",
+        "gcn",
+        "--recipe",
+        recipe.to_str().unwrap(),
+        "--epochs",
+        "0.05",
+        "--max-windows",
+        "24",
+        "--gcn-hidden",
+        "8",
+        "--gcn-stages",
+        "1",
+        "--json",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        v["matched_classes"],
+        serde_json::json!(["sneak2StepsLStart"])
+    );
+    let test_files = v["test_files"].as_array().unwrap();
+    assert!(!test_files.is_empty());
+    assert!(
+        test_files
+            .iter()
+            .all(|f| f.as_str().unwrap().contains("_bk_"))
+    );
+    assert!(
+        v["train_files"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|f| !f.as_str().unwrap().contains("_bk_"))
+    );
+    for cond in ["no_aug", "aug"] {
+        for ms in ["100", "200", "400"] {
+            let e = v[cond][ms].as_f64().unwrap_or(f64::NAN);
+            assert!(e.is_finite() && e > 0.0, "{cond} {ms}: {e}");
+        }
+    }
+    // One noisy copy per training clip.
+    let train = v["train_files"].as_array().unwrap().len() as u64;
+    assert_eq!(v["details"]["augmented_clips"].as_u64(), Some(train));
+    let err = failed(motionaug(&[
+        "eval",
+        "predict",
+        "--data",
+        HDM05,
+        "--class",
+        "sneak",
+        "--test-actor",
+        "zz",
+        "--model",
+        "seq2seq",
+    ]));
+    assert!(
+        err.contains("`zz` has no clips") && err.contains("bd"),
+        "{err}"
+    );
+}
