@@ -10,7 +10,8 @@
 //!   class, so a long run can be read while it goes).
 //!
 //! The science is in the `eval` crate; this file picks clips, builds the
-//! augmentation closures (a recipe through `synth`, or the VAE) and writes.
+//! augmentation closures (a recipe through the `pipeline` crate, or the VAE
+//! directly) and writes.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -105,7 +106,8 @@ fn load_fold(
 /// Where synthesised clips come from.
 #[derive(clap::Args, Clone)]
 struct AugmentArgs {
-    /// Kinematic recipe (TOML) applied to every training clip (`synth` ops).
+    /// Recipe (TOML or JSON) applied to the training clips in memory by the
+    /// pipeline: `[[ops]]`, and `[vae]`, `[correct]`, `[debias]` tables.
     #[arg(long, conflicts_with = "vae")]
     recipe: Option<PathBuf>,
     /// Train the motion VAE on the training clips and sample from this prior.
@@ -123,6 +125,10 @@ struct AugmentArgs {
     /// Seed of the augmentation (recipe seed override, VAE seed).
     #[arg(long)]
     aug_seed: Option<u64>,
+    /// Folder for the pipeline's intermediate results (corrections, models);
+    /// default: a temporary folder removed at the end.
+    #[arg(long)]
+    work: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -137,9 +143,10 @@ struct VaeChoice {
 /// The augmentation as a closure from training clips to synthesised clips.
 enum Augmentation {
     Recipe {
-        recipe: synth::Recipe,
+        recipe: Box<pipeline::Recipe>,
         seed: u64,
         label: String,
+        work: Option<PathBuf>,
     },
     Vae(VaeChoice),
 }
@@ -147,15 +154,14 @@ enum Augmentation {
 impl Augmentation {
     fn from_args(a: &AugmentArgs) -> anyhow::Result<Option<Augmentation>> {
         if let Some(path) = &a.recipe {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read {}", path.display()))?;
-            let recipe = synth::Recipe::from_toml_str(&text)
+            let recipe = pipeline::Recipe::from_file(path)
                 .with_context(|| format!("invalid recipe {}", path.display()))?;
             let seed = recipe.effective_seed(a.aug_seed);
             return Ok(Some(Augmentation::Recipe {
-                recipe,
+                recipe: Box::new(recipe),
                 seed,
                 label: path.display().to_string(),
+                work: a.work.clone(),
             }));
         }
         Ok(a.vae.map(|prior| {
@@ -178,7 +184,9 @@ impl Augmentation {
 
     fn apply(&self, train: &[(String, Motion)]) -> anyhow::Result<Vec<(String, Motion)>> {
         match self {
-            Augmentation::Recipe { recipe, seed, .. } => apply_recipe(recipe, *seed, train),
+            Augmentation::Recipe {
+                recipe, seed, work, ..
+            } => apply_recipe(recipe, *seed, work.as_deref(), train),
             Augmentation::Vae(v) => {
                 let model = train_vae(train, v.iterations, v.adversarial_weight, v.seed)?;
                 sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed)
@@ -187,25 +195,70 @@ impl Augmentation {
     }
 }
 
-/// Every op and copy of `recipe` on every clip (kinematic ops, in parallel).
+/// Runs `recipe` on the training clips in memory with the pipeline crate (the
+/// same job graph `motionaug augment` runs); returns the kept outputs.
 fn apply_recipe(
-    recipe: &synth::Recipe,
+    recipe: &pipeline::Recipe,
     seed: u64,
+    work: Option<&Path>,
     train: &[(String, Motion)],
 ) -> anyhow::Result<Vec<(String, Motion)>> {
     let start = Instant::now();
-    let out: Vec<Vec<(String, Motion)>> = train
-        .par_iter()
-        .map(|(name, m)| {
-            let generated = synth::expand_clip(recipe, name, m, seed)
-                .with_context(|| format!("recipe failed on {name}"))?;
-            Ok(generated
-                .into_iter()
-                .map(|g| (g.name, g.output.motion))
-                .collect())
+    let clips: Vec<pipeline::Clip> = train
+        .iter()
+        .map(|(name, m)| pipeline::Clip {
+            name: name.clone(),
+            source: name.clone(),
+            motion: m.clone(),
         })
-        .collect::<anyhow::Result<_>>()?;
-    let out: Vec<(String, Motion)> = out.into_iter().flatten().collect();
+        .collect();
+    let temp = std::env::temp_dir().join(format!("motionaug-eval-{}", std::process::id()));
+    let work_dir = work.unwrap_or(&temp);
+    let on_event = |event: pipeline::Event<'_>| {
+        if let pipeline::Event::JobFinished { job, ok } = event
+            && !matches!(job.kind, pipeline::JobKind::Synthesize { .. })
+        {
+            eprintln!(
+                "pipeline: {} {}",
+                job.key,
+                if ok { "done" } else { "failed" }
+            );
+        }
+    };
+    let result = pipeline::run(
+        recipe,
+        &clips,
+        &pipeline::Options {
+            out: None,
+            work: work_dir,
+            seed,
+            on_event: &on_event,
+        },
+    );
+    if work.is_none() {
+        let _ = std::fs::remove_dir_all(&temp);
+    }
+    let summary = result.context("the augmentation pipeline failed")?;
+    for (job, reason) in &summary.failures {
+        eprintln!("pipeline: {job} failed: {reason}");
+    }
+    if !summary.rejected.is_empty() {
+        eprintln!(
+            "pipeline: {} outputs rejected by the correction",
+            summary.rejected.len()
+        );
+    }
+    let out: Vec<(String, Motion)> = summary
+        .outputs
+        .into_iter()
+        .map(|o| (o.name, o.motion))
+        .collect();
+    if out.is_empty() {
+        bail!(
+            "the recipe produced no clips ({} jobs failed)",
+            summary.failures.len()
+        );
+    }
     eprintln!(
         "recipe: {} clips from {} in {:.1} s",
         out.len(),
@@ -575,18 +628,18 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                 ..Default::default()
             };
             // Synthesised sets.
-            let noise = synth::Recipe::from_toml_str(&format!(
+            let noise = pipeline::Recipe::from_toml_str(&format!(
                 "seed = 1\n[[ops]]\nop = \"noise\"\ncopies = 10\nsigma_deg = {}\n",
                 args.noise_sigma_deg
             ))?;
-            let ik = synth::Recipe::from_toml_str(&format!(
+            let ik = pipeline::Recipe::from_toml_str(&format!(
                 "seed = 1\n[[ops]]\nop = \"ik\"\npreset = \"{}\"\ncopies = 10\n",
                 class.to_ascii_lowercase()
             ))
             .with_context(|| format!("no IK preset for class `{class}`"))?;
             let mut sets: Vec<(String, Vec<(String, Motion)>)> = vec![
-                ("noise".into(), apply_recipe(&noise, 1, &split.train)?),
-                ("ik".into(), apply_recipe(&ik, 1, &split.train)?),
+                ("noise".into(), apply_recipe(&noise, 1, None, &split.train)?),
+                ("ik".into(), apply_recipe(&ik, 1, None, &split.train)?),
             ];
             let count = split.train.len() * 10;
             let mut vae_runs = vec![("vae", None)];
