@@ -323,6 +323,28 @@ fn eval_predict_tiny_run_reports_both_conditions_per_horizon() {
     // One noisy copy per training clip.
     let train = v["train_files"].as_array().unwrap().len() as u64;
     assert_eq!(v["details"]["augmented_clips"].as_u64(), Some(train));
+    // The same noisy copies scored against the held-out actor.
+    let text = ok(motionaug(&[
+        "eval",
+        "synth",
+        "--data",
+        HDM05,
+        "--class",
+        "sneak",
+        "--test-actor",
+        "bk",
+        "--recipe",
+        recipe.to_str().unwrap(),
+        "--json",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let (dtw, mmd) = (v["min_dtw"].as_f64().unwrap(), v["mmd"].as_f64().unwrap());
+    assert!(
+        dtw.is_finite() && dtw > 0.0 && (0.0..=2.0).contains(&mmd),
+        "{v}"
+    );
+    assert_eq!(v["scores"]["min_dtw"]["synth_clips"].as_u64(), Some(train));
+    assert!(v["original"]["min_dtw"]["synth_to_test"].as_f64().unwrap() > 0.0);
     let err = failed(motionaug(&[
         "eval",
         "predict",
