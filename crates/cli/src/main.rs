@@ -41,6 +41,8 @@ enum Command {
     Bench(commands::bench::Args),
     /// Train the MotionAug motion VAE on a class, or sample clips from one.
     Vae(commands::vae::Args),
+    /// Learn the bias physical correction leaves in clips, and remove it.
+    Debias(commands::debias::Args),
     /// Evaluate augmentations: min DTW / MMD, and motion prediction with and without them.
     Eval(commands::eval::Args),
 }
@@ -63,6 +65,7 @@ fn main() -> ExitCode {
         Command::Correct(args) => commands::correct::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Vae(args) => commands::vae::run(args),
+        Command::Debias(args) => commands::debias::run(args),
         Command::Eval(args) => commands::eval::run(args),
     };
     match result {

@@ -1,5 +1,6 @@
-//! `motionaug vae train` / `vae sample` end to end on the bundled HDM05 clips
-//! (a couple of iterations: this checks the plumbing, not the model quality).
+//! The learned commands end to end on the bundled HDM05 clips: `vae train` /
+//! `vae sample` and `debias train` / `debias apply` (a few iterations: this
+//! checks the plumbing, not the model quality, which the crates' tests check).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -64,4 +65,56 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         !bad.status.success(),
         "sampling from a non-model directory must fail"
     );
+}
+
+#[test]
+fn debias_trains_on_pairs_and_applies_to_corrected_clips() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    // A stand-in for a corrected clip: the original at the 30 Hz control rate.
+    ok(motionaug(&[
+        "convert",
+        "examples/data/HDM_bd_kickLFront1Reps_001_120.amc",
+        &p("kick30.bvh"),
+        "--skeleton",
+        "examples/data/HDM_bd.asf",
+        "--fps",
+        "30",
+    ]));
+    let pair = format!(
+        "{}=examples/data/HDM_bd_kickLFront1Reps_001_120.amc",
+        p("kick30.bvh")
+    );
+    ok(motionaug(&[
+        "debias",
+        "train",
+        "--pair",
+        &pair,
+        "--skeleton",
+        "examples/data/HDM_bd.asf",
+        "--out",
+        &p("model"),
+        "--iterations",
+        "5",
+        "--hidden",
+        "16,16",
+    ]));
+    assert!(dir.path().join("model/debias.json").is_file());
+    ok(motionaug(&[
+        "debias",
+        "apply",
+        &p("model"),
+        &p("kick30.bvh"),
+        "--out",
+        &p("debiased"),
+    ]));
+    let out = dir.path().join("debiased/kick30.bvh");
+    let m = motion::bvh::read(&out, motion::Unit::Auto).expect("debiased BVH");
+    assert_eq!(m.joints(), 31);
+    assert_eq!(m.fps(), 30.0);
+
+    // A pair without `=` is refused with a message naming it.
+    let bad = motionaug(&["debias", "train", "--pair", "a.bvh", "--out", &p("m2")]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("CORRECTED=ORIGINAL"));
 }

@@ -49,7 +49,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use glam::{DVec3, Mat3, Quat, Vec3};
-use motion::Skeleton;
+use motion::{Motion, Skeleton, Transform};
 use rapier3d::parry;
 use serde::Serialize;
 
@@ -251,6 +251,14 @@ pub struct CharacterOptions {
     pub total_mass_kg: Option<f32>,
     /// Ground / body friction coefficient.
     pub friction: f32,
+    /// Tilt each foot box so its sole is flat on the ground in the clip's own
+    /// stance frames (see [`CharacterSpec::calibrate_feet`]). Off by default:
+    /// measured on the bundled HDM05 kick (action 0, then 90 s of training) it
+    /// changed neither foot skating after correction (0.107 -> 0.103 m/s) nor
+    /// tracking much (mean imitation reward at action 0 0.871 -> 0.855 on the
+    /// kick, 0.799 -> 0.838 on the jog), and the tilted box corners doubled the
+    /// mean penetration (0.006 -> 0.015 m).
+    pub calibrate_feet: bool,
 }
 
 impl Default for CharacterOptions {
@@ -258,8 +266,19 @@ impl Default for CharacterOptions {
         CharacterOptions {
             total_mass_kg: None,
             friction: 0.9,
+            calibrate_feet: false,
         }
     }
+}
+
+/// What [`CharacterSpec::calibrate_feet`] did to one foot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FootCalibration {
+    pub body: usize,
+    /// Frames used (the foot planted).
+    pub stance_frames: usize,
+    /// Rotation applied to the box, radians.
+    pub tilt_rad: f32,
 }
 
 /// One line of the mapping report.
@@ -271,6 +290,90 @@ pub struct MappingLine {
 }
 
 impl CharacterSpec {
+    /// Tilt each foot box so that its sole lies flat on the ground when the
+    /// foot is planted in `motion`.
+    ///
+    /// The boxes are built from the rest pose, whose foot is rarely the
+    /// standing foot: HDM05's rest foot points 22 degrees down, its planted
+    /// feet about 31 degrees, so an uncalibrated box stands on its toe edge
+    /// and pivots. Stance frames are those where the ankle is within
+    /// 2 cm of its lowest height over the clip and moves slower than 0.3 m/s
+    /// horizontally; the box is turned about the ankle so that its up
+    /// axis is the mean world-up direction (in the foot's frame) over them.
+    /// Feet never planted keep the rest-pose box.
+    pub fn calibrate_feet(&mut self, motion: &Motion) -> Vec<FootCalibration> {
+        let n = motion.frames();
+        if n < 2 {
+            return Vec::new();
+        }
+        let dt = 1.0 / motion.fps();
+        let mut x = vec![Transform::IDENTITY; motion.joints()];
+        let feet = self.feet.clone();
+        let mut poses: Vec<Vec<(Vec3, Quat)>> = vec![Vec::with_capacity(n); feet.len()];
+        for t in 0..n {
+            motion.world_transforms_into(t, &mut x);
+            for (i, &b) in feet.iter().enumerate() {
+                let tr = x[self.bodies[b].driver];
+                poses[i].push((tr.translation.as_vec3(), tr.rotation.as_quat().normalize()));
+            }
+        }
+        let mut out = Vec::new();
+        for (i, &b) in feet.iter().enumerate() {
+            let shape = self.bodies[b].shape;
+            let Shape::Box {
+                center,
+                half_extents,
+                rotation,
+            } = shape
+            else {
+                continue;
+            };
+            // The ankle, not the box: a rest-pose box tilted in the swing can dip
+            // lower than in stance.
+            let lows: Vec<f32> = poses[i].iter().map(|(p, _)| p.y).collect();
+            let floor = lows.iter().copied().fold(f32::INFINITY, f32::min);
+            let mut up = Vec3::ZERO;
+            let mut count = 0;
+            for t in 0..n {
+                let (p, q) = poses[i][t];
+                let other = if t + 1 < n {
+                    poses[i][t + 1].0
+                } else {
+                    poses[i][t - 1].0
+                };
+                let v = (other - p) / dt as f32;
+                let slow = Vec3::new(v.x, 0.0, v.z).length() < 0.3;
+                if lows[t] < floor + 0.02 && slow {
+                    up += q.inverse() * Vec3::Y;
+                    count += 1;
+                }
+            }
+            if count < 3 || up.length() < 1e-6 {
+                continue;
+            }
+            let target = up.normalize();
+            let current = rotation * Vec3::Y;
+            let delta = Quat::from_rotation_arc(current, target);
+            let tilt = delta.angle_between(Quat::IDENTITY);
+            if !tilt.is_finite() {
+                continue;
+            }
+            let body = &mut self.bodies[b];
+            body.shape = Shape::Box {
+                center: delta * center,
+                half_extents,
+                rotation: (delta * rotation).normalize(),
+            };
+            body.com_local = body.shape.center();
+            out.push(FootCalibration {
+                body: b,
+                stance_frames: count,
+                tilt_rad: tilt,
+            });
+        }
+        out
+    }
+
     /// File joint -> simulated body (or the body it is merged into).
     pub fn mapping_report(&self) -> Vec<MappingLine> {
         self.skeleton

@@ -198,7 +198,11 @@ fn clamp_hinge(q: Quat, limit: &HingeLimit, reference: Quat) -> Quat {
 
 impl ImitationEnv {
     pub fn new(motion: &Motion, config: &Config) -> Result<Self, PhysicsError> {
-        let spec = CharacterSpec::build(motion.skeleton().clone(), &config.character)?;
+        let mut spec = CharacterSpec::build(motion.skeleton().clone(), &config.character)?;
+        if config.character.calibrate_feet {
+            let feet = spec.calibrate_feet(motion);
+            tracing::debug!(?feet, "feet calibrated");
+        }
         Self::with_character(motion, spec, config)
     }
 

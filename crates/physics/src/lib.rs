@@ -38,7 +38,9 @@ pub mod reference;
 pub mod sim;
 
 pub use bench::{BenchReport, bench_physics};
-pub use character::{CharacterOptions, CharacterSpec, JointMapping, MappingLine, Role, Side};
+pub use character::{
+    CharacterOptions, CharacterSpec, FootCalibration, JointMapping, MappingLine, Role, Shape, Side,
+};
 pub use env::{Config, ImitationEnv, Residual, StepInfo, StepResult};
 pub use sim::{BodyState, Sim, SimParams};
 

@@ -202,3 +202,34 @@ fn recorded_kick_is_close_to_the_clip_but_simulated() {
     // kick. Closing that gap is the policy's job.
     assert!(root_err < 0.5, "{root_err}");
 }
+
+#[test]
+fn foot_calibration_lays_the_soles_flat_in_stance() {
+    let kick = hdm05("HDM_bd_kickLFront1Reps_001_120.amc");
+    let mut spec =
+        physics::CharacterSpec::build(kick.skeleton().clone(), &Default::default()).unwrap();
+    let before = spec.clone();
+    let feet = spec.calibrate_feet(&kick);
+    assert_eq!(
+        feet.len(),
+        2,
+        "both feet are planted somewhere in a kick: {feet:?}"
+    );
+    // The sole's up axis, in world frame, at the first frame (both feet planted).
+    let x = kick.world_transforms(0);
+    let tilt = |s: &physics::CharacterSpec, b: usize| {
+        let physics::Shape::Box { rotation, .. } = s.bodies[b].shape else {
+            panic!("feet are boxes")
+        };
+        let q = x[s.bodies[b].driver].rotation.as_quat() * rotation;
+        (q * glam::Vec3::Y).angle_between(glam::Vec3::Y)
+    };
+    for f in &feet {
+        assert!(
+            f.stance_frames >= 3 && f.tilt_rad > 0.01 && f.tilt_rad < std::f32::consts::PI,
+            "{f:?}"
+        );
+        let (was, now) = (tilt(&before, f.body), tilt(&spec, f.body));
+        assert!(now < 0.2 && now < was, "sole tilt {was} -> {now} rad");
+    }
+}

@@ -25,6 +25,9 @@ enum What {
         seconds: f64,
         #[arg(long)]
         json: bool,
+        /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+        #[arg(long)]
+        calibrate_feet: bool,
     },
 }
 
@@ -35,9 +38,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             input,
             seconds,
             json,
+            calibrate_feet,
         } => {
             let motion = input.load(&clip)?;
-            let config = physics::Config::default();
+            let mut config = physics::Config::default();
+            config.character.calibrate_feet = calibrate_feet;
             let report = physics::bench::bench_physics_for(&motion, &config, seconds)?;
             let text = if json {
                 serde_json::to_string_pretty(&report)? + "\n"

@@ -42,6 +42,9 @@ pub struct Args {
     max_iterations: Option<u64>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+    #[arg(long)]
+    calibrate_feet: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -55,6 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..CorrectConfig::default()
     };
     config.physics.residual = args.residual;
+    config.physics.character.calibrate_feet = args.calibrate_feet;
     config.ppo.threads = args.threads;
     let terminal = std::io::stderr().is_terminal();
     let outcome = correct::correct(

@@ -4,6 +4,7 @@ pub mod augment;
 pub mod bench;
 pub mod convert;
 pub mod correct;
+pub mod debias;
 pub mod eval;
 pub mod inspect;
 pub mod interaction;

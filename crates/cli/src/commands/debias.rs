@@ -1,0 +1,159 @@
+//! `motionaug debias train --pair CORRECTED=ORIGINAL ... --out MODEL` and
+//! `motionaug debias apply MODEL IN... --out DIR`: the debiasing step on its
+//! own (recipes run it with a `[debias]` table).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use debias::{Debiaser, TrainConfig};
+use motion::Motion;
+
+use crate::input::{ClipArgs, clip_name};
+use crate::output::write_atomic;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(clap::Subcommand)]
+enum What {
+    /// Learn the correction's bias from (corrected original, original) pairs.
+    Train {
+        /// `CORRECTED=ORIGINAL`: a clip after `motionaug correct` and the clip it
+        /// was made from (AMC originals need --skeleton). Repeat for every pair.
+        #[arg(long = "pair", required = true, value_name = "CORRECTED=ORIGINAL")]
+        pairs: Vec<String>,
+        #[command(flatten)]
+        clip: ClipArgs,
+        /// Model directory (debias.safetensors + debias.json).
+        #[arg(long)]
+        out: PathBuf,
+        /// Optimiser steps.
+        #[arg(long, default_value_t = TrainConfig::default().iterations)]
+        iterations: usize,
+        /// Hidden layer sizes, comma separated (paper: 512,512,512,512).
+        #[arg(long, value_delimiter = ',', default_values_t = TrainConfig::default().hidden)]
+        hidden: Vec<usize>,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
+    /// Remove the learned bias from corrected clips.
+    Apply {
+        /// Model directory written by `debias train`.
+        model: PathBuf,
+        /// Corrected clips (BVH).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        #[command(flatten)]
+        clip: ClipArgs,
+        /// Output directory: `<name>.bvh` and `<name>.npz` per input.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.what {
+        What::Train {
+            pairs,
+            clip,
+            out,
+            iterations,
+            hidden,
+            seed,
+        } => train(&pairs, &clip, &out, iterations, hidden, seed),
+        What::Apply {
+            model,
+            inputs,
+            clip,
+            out,
+        } => apply(&model, &inputs, &clip, &out),
+    }
+}
+
+/// Read a corrected clip onto the original's skeleton (joint for joint).
+fn onto(corrected: Motion, original: &Motion, path: &Path) -> anyhow::Result<Motion> {
+    let (a, b) = (corrected.skeleton(), original.skeleton());
+    let same = a.len() == b.len() && (0..a.len()).all(|j| a.joint(j).name == b.joint(j).name);
+    if !same {
+        bail!(
+            "{}: its joints are not those of its original ({} vs {} joints)",
+            path.display(),
+            a.len(),
+            b.len()
+        );
+    }
+    Ok(original.with_frames(
+        corrected.fps(),
+        corrected.root_translation().to_vec(),
+        corrected.rotations().to_vec(),
+    )?)
+}
+
+fn train(
+    pairs: &[String],
+    clip: &ClipArgs,
+    out: &Path,
+    iterations: usize,
+    hidden: Vec<usize>,
+    seed: u64,
+) -> anyhow::Result<()> {
+    let mut loaded = Vec::with_capacity(pairs.len());
+    for pair in pairs {
+        let Some((c, o)) = pair.split_once('=') else {
+            bail!("--pair `{pair}`: expected CORRECTED=ORIGINAL");
+        };
+        let (c, o) = (PathBuf::from(c), PathBuf::from(o));
+        let original = clip.load(&o)?;
+        let corrected = onto(clip.load(&c)?, &original, &c)?;
+        loaded.push((corrected, original));
+    }
+    let config = TrainConfig {
+        iterations,
+        hidden,
+        seed,
+        ..TrainConfig::default()
+    };
+    let (model, report) = debias::train(&loaded, &config).context("training the debiaser")?;
+    model
+        .save(out)
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!(
+        "{} pairs, {} frames: loss {:.4} -> {:.4} in {:.1} s; wrote {}",
+        report.pairs,
+        report.frames,
+        report.loss_before,
+        report.loss_after,
+        report.wall_s,
+        out.display()
+    );
+    Ok(())
+}
+
+fn apply(model: &Path, inputs: &[PathBuf], clip: &ClipArgs, out: &Path) -> anyhow::Result<()> {
+    let model =
+        Debiaser::load(model).with_context(|| format!("cannot load {}", model.display()))?;
+    let clips = inputs
+        .iter()
+        .map(|p| clip.load(p))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    for (path, motion) in inputs.iter().zip(&clips) {
+        let debiased = model
+            .apply(motion)
+            .with_context(|| format!("debiasing {}", path.display()))?;
+        let name = clip_name(path);
+        write_atomic(
+            &out.join(format!("{name}.bvh")),
+            &motion::bvh::to_bytes(&debiased),
+        )?;
+        write_atomic(
+            &out.join(format!("{name}.npz")),
+            &motion::npz::motion_to_bytes(&debiased, &[])?,
+        )?;
+    }
+    eprintln!("wrote {} clips to {}", clips.len(), out.display());
+    Ok(())
+}
