@@ -361,4 +361,27 @@ fn eval_predict_tiny_run_reports_both_conditions_per_horizon() {
         err.contains("`zz` has no clips") && err.contains("bd"),
         "{err}"
     );
+    // Without an augmentation there is no `aug`.
+    let text = ok(motionaug(&[
+        "eval",
+        "predict",
+        "--data",
+        HDM05,
+        "--class",
+        "sneak",
+        "--test-actor",
+        "bk",
+        "--model",
+        "seq2seq",
+        "--iterations",
+        "2",
+        "--max-windows",
+        "8",
+        "--seq2seq-hidden",
+        "8",
+        "--json",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v["no_aug"]["400"].as_f64().unwrap() > 0.0);
+    assert!(v.get("aug").is_none(), "{v}");
 }

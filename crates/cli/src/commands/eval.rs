@@ -517,7 +517,7 @@ fn run_predict(args: PredictArgs) -> anyhow::Result<()> {
     let result = protocol::run(&split.train, &split.test, augment, &config, &mut |l| {
         eprintln!("{l}")
     })?;
-    let value = json!({
+    let mut value = json!({
         "class": args.fold.class,
         "matched_classes": split.classes(),
         "test_actor": args.fold.test_actor,
@@ -526,10 +526,12 @@ fn run_predict(args: PredictArgs) -> anyhow::Result<()> {
         "train_files": split.train_files.iter().map(|f| &f.name).collect::<Vec<_>>(),
         "test_files": split.test_files.iter().map(|f| &f.name).collect::<Vec<_>>(),
         "no_aug": result.no_aug.errors,
-        "aug": result.aug.as_ref().map(|a| &a.errors),
         "zero_velocity": result.zero_velocity,
         "details": result,
     });
+    if let Some(a) = &result.aug {
+        value["aug"] = serde_json::to_value(&a.errors)?;
+    }
     if let Some(path) = &args.out {
         write_json(path, &value)?;
     }
