@@ -10,7 +10,7 @@
 
 use motion::Motion;
 use motion::glam::{DQuat, DVec3};
-use motion::rotation::{from_6d, to_6d};
+use motion::rotation::{from_6d, heading, to_6d};
 
 /// Numbers per frame state for `joints` joints (root tilt counts as one joint).
 pub fn state_dim(joints: usize) -> usize {
@@ -20,16 +20,6 @@ pub fn state_dim(joints: usize) -> usize {
 /// Input numbers per frame: the state and its frame difference.
 pub fn input_dim(joints: usize) -> usize {
     2 * state_dim(joints)
-}
-
-/// Yaw of a root rotation about +y (angle of its forward +z axis on the ground).
-pub fn heading(q: DQuat) -> f64 {
-    let f = q * DVec3::Z;
-    if f.x.abs() < 1e-9 && f.z.abs() < 1e-9 {
-        let u = q * DVec3::Y;
-        return u.x.atan2(u.z);
-    }
-    f.x.atan2(f.z)
 }
 
 /// Root velocity at frame `t` (backward difference; forward at frame 0), m/s.

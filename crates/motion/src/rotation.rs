@@ -25,6 +25,18 @@ pub fn to_rotation_vector(q: DQuat) -> DVec3 {
     }
 }
 
+/// Heading of a root rotation: the angle about +y of its forward (+z) axis
+/// projected on the ground plane (0 when it faces +z). A root facing straight
+/// up or down uses its up axis' projection instead.
+pub fn heading(root_rotation: DQuat) -> f64 {
+    let f = root_rotation * DVec3::Z;
+    if f.x.abs() < 1e-9 && f.z.abs() < 1e-9 {
+        let u = root_rotation * DVec3::Y;
+        return u.x.atan2(u.z);
+    }
+    f.x.atan2(f.z)
+}
+
 /// The continuous 6D representation of a rotation (Zhou et al. 2019): the first
 /// two columns of its matrix, `[x axis, y axis]`.
 pub fn to_6d(q: DQuat) -> [f64; 6] {

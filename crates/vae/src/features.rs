@@ -46,16 +46,9 @@ pub fn frame_dim(joints: usize) -> usize {
     3 + 6 * joints
 }
 
-/// Heading of a root rotation: the angle about +y of its forward (+z) axis
-/// projected on the ground plane (0 when it faces +z).
+/// Heading of a root rotation (see [`motion::rotation::heading`]).
 pub fn heading(root_rotation: DQuat) -> f64 {
-    let f = root_rotation * DVec3::Z;
-    if f.x.abs() < 1e-9 && f.z.abs() < 1e-9 {
-        // Facing straight up or down: use the up axis' projection instead.
-        let u = root_rotation * DVec3::Y;
-        return u.x.atan2(u.z);
-    }
-    f.x.atan2(f.z)
+    motion::rotation::heading(root_rotation)
 }
 
 /// First two columns of the rotation matrix of `q` (see [`motion::rotation::to_6d`]).

@@ -42,6 +42,10 @@ pub struct Args {
     max_iterations: Option<u64>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Start from another correction's checkpoints (its `DIR/checkpoints`), e.g.
+    /// the source clip's for a synthesised variant of it.
+    #[arg(long, value_name = "CHECKPOINTS")]
+    warm_start: Option<PathBuf>,
     /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
     #[arg(long)]
     calibrate_feet: bool,
@@ -58,6 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..CorrectConfig::default()
     };
     config.physics.residual = args.residual;
+    config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = args.calibrate_feet;
     config.ppo.threads = args.threads;
     let terminal = std::io::stderr().is_terminal();
