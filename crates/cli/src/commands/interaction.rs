@@ -7,6 +7,18 @@
 //! * `variations A.bvh B.bvh --count N --min 0.75 --max 1.25 --seed S --out DIR`:
 //!   a dataset of variations from the optimiser, one sub-directory per
 //!   variation (`0000/A.bvh`, ...) and `manifest.json` listing scales and reports.
+//!
+//! The learned model (crate `interaction-model`):
+//!
+//! * `dataset --pairs DIR --out DATA`: the optimiser's variations of every
+//!   pair `<name>_A.bvh` + `<name>_B.bvh` in DIR at 30 fps, cached as
+//!   `dataset.json` + one NPZ per pair.
+//! * `train DATA --out MODEL`: train the three networks (safetensors + JSON).
+//! * `generate MODEL A.bvh B.bvh [--scale S] --out DIR`: one variation by the
+//!   model (B's scale given, or drawn from the skeleton prior); writes `A.bvh`,
+//!   `B.bvh`, `A.npz`, `B.npz`, `report.json`.
+//! * `eval DATA --out DIR [--pairs DIR]`: the four-split table (E_r, E_b, JPD,
+//!   FID) and the comparison with the optimiser: `eval.json` + `eval.md`.
 
 use std::path::{Path, PathBuf};
 
@@ -29,6 +41,119 @@ enum Command {
     Retarget(RetargetArgs),
     /// Generate many variations over a scale range (training data).
     Variations(VariationArgs),
+    /// Build the learned model's training data with the optimiser (cached on disk).
+    Dataset(DatasetArgs),
+    /// Train the learned model (skeleton prior, retargeting and adaptation networks).
+    Train(TrainArgs),
+    /// Make one variation with a trained model (given scale, or drawn from its prior).
+    Generate(GenerateArgs),
+    /// Evaluate the learned model on the four splits and against the optimiser.
+    Eval(EvalArgs),
+}
+
+#[derive(clap::Args)]
+struct DatasetArgs {
+    /// Directory of pairs `<name>_A.bvh` + `<name>_B.bvh`.
+    #[arg(long)]
+    pairs: PathBuf,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Output directory (dataset.json + one NPZ per pair).
+    #[arg(long)]
+    out: PathBuf,
+    /// Variations per grid scale (0.75, 0.80, ..., 1.25); the first is uniform.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Per-bone jitter of the other repeats.
+    #[arg(long, default_value_t = 0.04)]
+    bone_jitter: f64,
+    /// Frame rate of the data (the networks' rate).
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Retarget options as JSON (solver weights, key pair settings).
+    #[arg(long, value_name = "JSON")]
+    options: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct TrainArgs {
+    /// Dataset directory (from `interaction dataset`).
+    data: PathBuf,
+    /// Model directory to write (weights.safetensors + model.json).
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, default_value_t = 1500)]
+    steps: usize,
+    /// Window length in frames.
+    #[arg(long, default_value_t = 16)]
+    window: usize,
+    /// Training window stride in frames.
+    #[arg(long, default_value_t = 2)]
+    stride: usize,
+    #[arg(long, default_value_t = 8)]
+    batch: usize,
+    #[arg(long, default_value_t = 32)]
+    hidden: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(clap::Args)]
+struct GenerateArgs {
+    /// Model directory (from `interaction train`).
+    model: PathBuf,
+    a: PathBuf,
+    b: PathBuf,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// One factor for all of B's bones; without it (and --scale-json) the
+    /// scale is drawn from the model's skeleton prior.
+    #[arg(long, conflicts_with = "scale_json")]
+    scale: Option<f64>,
+    /// Per-bone factors: a JSON file or inline JSON (as for `retarget`).
+    #[arg(long, value_name = "FILE|JSON")]
+    scale_json: Option<String>,
+    /// Seed of the prior draw.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct EvalArgs {
+    /// Dataset directory (from `interaction dataset`).
+    data: PathBuf,
+    /// Output directory: eval.json, eval.md.
+    #[arg(long)]
+    out: PathBuf,
+    /// The source pairs (as given to `dataset`), for the whole-clip comparison
+    /// with the optimiser; without it the comparison is skipped.
+    #[arg(long)]
+    pairs: Option<PathBuf>,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Training steps per fold.
+    #[arg(long, default_value_t = 300)]
+    steps: usize,
+    #[arg(long, default_value_t = 16)]
+    window: usize,
+    #[arg(long, default_value_t = 2)]
+    stride: usize,
+    #[arg(long, default_value_t = 8)]
+    batch: usize,
+    #[arg(long, default_value_t = 32)]
+    hidden: usize,
+    /// Training steps of the FID feature network.
+    #[arg(long, default_value_t = 300)]
+    feature_steps: usize,
+    /// Only these splits (random, cross_scale, cross_interaction, cross_scale_interaction).
+    #[arg(long = "split")]
+    splits: Vec<String>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 /// Options shared by both subcommands.
@@ -95,6 +220,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::Retarget(a) => retarget(a),
         Command::Variations(v) => variations(v),
+        Command::Dataset(d) => dataset(d),
+        Command::Train(t) => train(t),
+        Command::Generate(g) => generate(g),
+        Command::Eval(e) => eval(e),
     }
 }
 
@@ -135,8 +264,16 @@ impl PairArgs {
 }
 
 fn parse_scale(args: &RetargetArgs) -> anyhow::Result<BoneScale> {
-    match (args.scale, &args.scale_json) {
-        (Some(s), _) => Ok(BoneScale::uniform(s)?),
+    scale_from(args.scale, &args.scale_json)?
+        .ok_or_else(|| anyhow::anyhow!("give --scale FACTOR or --scale-json FILE|JSON"))
+}
+
+fn scale_from(
+    scale: Option<f64>,
+    scale_json: &Option<String>,
+) -> anyhow::Result<Option<BoneScale>> {
+    Ok(Some(match (scale, scale_json) {
+        (Some(s), _) => BoneScale::uniform(s)?,
         (None, Some(text)) => {
             let path = Path::new(text);
             let json = if path.is_file() {
@@ -145,10 +282,10 @@ fn parse_scale(args: &RetargetArgs) -> anyhow::Result<BoneScale> {
             } else {
                 text.clone()
             };
-            BoneScale::from_json_str(&json).with_context(|| format!("--scale-json `{text}`"))
+            BoneScale::from_json_str(&json).with_context(|| format!("--scale-json `{text}`"))?
         }
-        (None, None) => bail!("give --scale FACTOR or --scale-json FILE|JSON"),
-    }
+        (None, None) => return Ok(None),
+    }))
 }
 
 /// Write `A.bvh`, `B.bvh`, `A.npz`, `B.npz` and `report.json` into `dir`.
@@ -226,5 +363,202 @@ fn variations(args: VariationArgs) -> anyhow::Result<()> {
         all.len(),
         args.pair.out.display()
     );
+    Ok(())
+}
+
+/// The pairs `<name>_A.bvh` + `<name>_B.bvh` of a directory, by name.
+fn find_pairs(dir: &Path) -> anyhow::Result<Vec<(String, PathBuf, PathBuf)>> {
+    let mut out = Vec::new();
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
+    for e in entries {
+        let path = e?.path();
+        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        if let Some(stem) = name.strip_suffix("_A.bvh") {
+            let b = dir.join(format!("{stem}_B.bvh"));
+            if b.is_file() {
+                out.push((stem.to_string(), path.clone(), b));
+            }
+        }
+    }
+    out.sort();
+    if out.is_empty() {
+        bail!("{}: no pairs <name>_A.bvh + <name>_B.bvh", dir.display());
+    }
+    Ok(out)
+}
+
+fn load_pairs(dir: &Path, clip: &ClipArgs) -> anyhow::Result<Vec<(String, Motion, Motion)>> {
+    find_pairs(dir)?
+        .into_iter()
+        .map(|(name, a, b)| Ok((name, clip.load(&a)?, clip.load(&b)?)))
+        .collect()
+}
+
+fn dataset(args: DatasetArgs) -> anyhow::Result<()> {
+    let mut config = interaction_model::DatasetConfig {
+        fps: args.fps,
+        repeats: args.repeats,
+        bone_jitter: args.bone_jitter,
+        seed: args.seed,
+        ..Default::default()
+    };
+    if let Some(path) = &args.options {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        config.retarget = serde_json::from_str(&text)
+            .with_context(|| format!("bad retarget options {}", path.display()))?;
+    }
+    config.grid()?;
+    let pairs = load_pairs(&args.pairs, &args.clip)?;
+    eprintln!(
+        "making {} variations of each of {} pairs with the optimiser",
+        config.grid()?.len() * config.repeats,
+        pairs.len()
+    );
+    let data = interaction_model::Dataset::build(&pairs, &config)?;
+    data.save(&args.out)?;
+    for p in &data.pairs {
+        let mean_s = p.variations.iter().map(|v| v.wall_s).sum::<f64>() / p.variations.len() as f64;
+        eprintln!(
+            "  {}: {} frames at {} fps, {} variations, optimiser {:.3} s / variation",
+            p.name,
+            p.frames,
+            p.fps,
+            p.variations.len(),
+            mean_s
+        );
+    }
+    eprintln!("wrote {} ({:.1} s)", args.out.display(), data.build_wall_s);
+    Ok(())
+}
+
+fn train(args: TrainArgs) -> anyhow::Result<()> {
+    let data = interaction_model::Dataset::load(&args.data)?;
+    let config = interaction_model::TrainConfig {
+        steps: args.steps,
+        window: args.window,
+        stride: args.stride,
+        batch: args.batch,
+        hidden: args.hidden,
+        seed: args.seed,
+        ..Default::default()
+    };
+    let windows = data.windows(config.window, config.stride, |_, _| true);
+    eprintln!(
+        "training on {} windows of {} frames from {} pairs",
+        windows.len(),
+        config.window,
+        data.pairs.len()
+    );
+    let bar = crate::progress::bar(config.steps as u64, "steps");
+    let mut progress = |step: usize, l: &interaction_model::train::Losses| {
+        bar.set_position(step as u64 + 1);
+        if step.is_multiple_of(50) {
+            bar.set_message(format!(
+                "loss {:.4} (B {:.3} m, A {:.3} m)",
+                l.total, l.b_position_m, l.a_position_m
+            ));
+        }
+    };
+    let model = interaction_model::train(&data, &windows, &config, Some(&mut progress))?;
+    bar.finish_and_clear();
+    model.save(&args.out)?;
+    let l = &model.meta.training.final_losses;
+    eprintln!(
+        "wrote {}: {} parameters, {:.0} s, final loss {:.4} (mean position error B {:.4} m, A {:.4} m)",
+        args.out.display(),
+        model.parameter_count(),
+        model.meta.training.seconds,
+        l.total,
+        l.b_position_m,
+        l.a_position_m
+    );
+    Ok(())
+}
+
+fn generate(args: GenerateArgs) -> anyhow::Result<()> {
+    let model = interaction_model::InteractionModel::load(&args.model)?;
+    let a = args.clip.load(&args.a)?;
+    let b = args.clip.load(&args.b)?;
+    let (scale, task) = match scale_from(args.scale, &args.scale_json)? {
+        Some(s) => (s, "retarget"),
+        None => (
+            interaction_model::generate::sample_scale(&model, args.seed)?,
+            "generation",
+        ),
+    };
+    let g =
+        interaction_model::generate::generate(&model, &a, &b, &scale, task, &Default::default())
+            .with_context(|| format!("{} + {}", args.a.display(), args.b.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    for (name, m) in [("A", &g.a), ("B", &g.b)] {
+        write_atomic(
+            &args.out.join(format!("{name}.bvh")),
+            &motion::bvh::to_bytes(m),
+        )?;
+        write_atomic(
+            &args.out.join(format!("{name}.npz")),
+            &motion::npz::motion_to_bytes(m, &[])?,
+        )?;
+    }
+    write_json(&args.out.join("report.json"), &g.report)?;
+    let r = &g.report;
+    eprintln!(
+        "wrote {} ({}, B scale {:.3}): {} key pair(s), jpd {}, network bone error {:.4} m, {:.3} s",
+        args.out.display(),
+        r.task,
+        r.scale.default,
+        r.key_pairs.len(),
+        r.jpd_m
+            .map(|j| format!("{j:.4} m"))
+            .unwrap_or_else(|| "n/a".into()),
+        r.network_bone_error_m,
+        r.wall_s
+    );
+    Ok(())
+}
+
+fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    let data = interaction_model::Dataset::load(&args.data)?;
+    let sources = match &args.pairs {
+        Some(dir) => load_pairs(dir, &args.clip)?,
+        None => Vec::new(),
+    };
+    for s in &args.splits {
+        if !interaction_model::eval::SPLITS.contains(&s.as_str()) {
+            bail!(
+                "--split `{s}`: expected one of {}",
+                interaction_model::eval::SPLITS.join(", ")
+            );
+        }
+    }
+    let config = interaction_model::eval::EvalConfig {
+        train: interaction_model::TrainConfig {
+            steps: args.steps,
+            window: args.window,
+            stride: args.stride,
+            batch: args.batch,
+            hidden: args.hidden,
+            seed: args.seed,
+            ..Default::default()
+        },
+        feature_steps: args.feature_steps,
+        test_stride: (args.window / 2).max(1),
+        seed: args.seed,
+        ..Default::default()
+    };
+    let mut progress = |msg: &str| eprintln!("{msg}");
+    let report =
+        interaction_model::eval::evaluate(&data, &config, &args.splits, &sources, &mut progress)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    write_json(&args.out.join("eval.json"), &report)?;
+    let md = interaction_model::eval::markdown(&report);
+    write_atomic(&args.out.join("eval.md"), md.as_bytes())?;
+    crate::output::print_stdout(&md)?;
     Ok(())
 }
