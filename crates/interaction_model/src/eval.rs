@@ -51,6 +51,8 @@ pub struct EvalConfig {
     pub feature_steps: usize,
     /// Held-out variations per pair in the whole-clip comparison.
     pub compare_per_pair: usize,
+    /// Folds trained at once (each on one thread).
+    pub jobs: usize,
     pub seed: u64,
 }
 
@@ -61,6 +63,7 @@ impl Default for EvalConfig {
             test_stride: 8,
             feature_steps: 300,
             compare_per_pair: 3,
+            jobs: 1,
             seed: 0,
         }
     }
@@ -425,21 +428,19 @@ fn mean_opt(xs: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 }
 
 /// Run the four splits (or those named in `only`) and the comparison
-/// (when the source clips are given, named as in the dataset), on one thread
-/// (see [`crate::train::train`]).
+/// (when the source clips are given, named as in the dataset). Folds run
+/// `config.jobs` at a time, each on one thread (see [`crate::train::train`]).
+/// `on_split` gets the report so far (complete splits) after each fold, to
+/// save partial results of a long run.
 pub fn evaluate(
     dataset: &Dataset,
     config: &EvalConfig,
     only: &[String],
     sources: &[(String, Motion, Motion)],
     progress: &mut (dyn FnMut(&str) + Send),
+    on_split: &mut (dyn FnMut(&EvalReport) + Send),
 ) -> Result<EvalReport> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .thread_name(|_| "interaction-eval".into())
-        .build()
-        .map_err(|e| ModelError::Data(format!("cannot start the evaluation thread: {e}")))?;
-    pool.install(|| evaluate_here(dataset, config, only, sources, progress))
+    evaluate_here(dataset, config, only, sources, progress, on_split)
 }
 
 fn evaluate_here(
@@ -448,6 +449,7 @@ fn evaluate_here(
     only: &[String],
     sources: &[(String, Motion, Motion)],
     progress: &mut (dyn FnMut(&str) + Send),
+    on_split: &mut (dyn FnMut(&EvalReport) + Send),
 ) -> Result<EvalReport> {
     let start = Instant::now();
     let w = config.train.window;
@@ -464,58 +466,167 @@ fn evaluate_here(
     fc.steps = config.feature_steps;
     fc.seed = config.seed;
     progress("training the FID feature network");
-    let (features, quality) = FeatureNet::train(dataset, &f_train, &f_test, w, &fc)?;
-    let mut splits = Vec::new();
-    let mut comparison = Vec::new();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| ModelError::Data(format!("cannot start the evaluation thread: {e}")))?;
+    let (features, quality) =
+        one.install(|| FeatureNet::train(dataset, &f_train, &f_test, w, &fc))?;
+    // Every fold of every split as one task; tasks run `jobs` at a time.
+    struct Task {
+        split: &'static str,
+        name: String,
+        train: Vec<Sample>,
+        test: Vec<Sample>,
+    }
+    let mut tasks = Vec::new();
     for split in SPLITS {
         if !only.is_empty() && !only.iter().any(|s| s == split) {
             continue;
         }
-        let mut results = Vec::new();
         for (name, tr, te) in folds(dataset, split, config.seed) {
-            let train_set = dataset.windows(w, config.train.stride, &tr);
-            let test_set = dataset.windows(w, config.test_stride, &te);
-            if train_set.is_empty() || test_set.is_empty() {
+            let train = dataset.windows(w, config.train.stride, &tr);
+            let test = dataset.windows(w, config.test_stride, &te);
+            if train.is_empty() || test.is_empty() {
                 return Err(ModelError::Data(format!(
                     "split {split} fold {name}: {} training and {} test windows",
-                    train_set.len(),
-                    test_set.len()
+                    train.len(),
+                    test.len()
                 )));
             }
-            progress(&format!(
-                "{split} {name}: training on {} windows, testing on {}",
-                train_set.len(),
-                test_set.len()
-            ));
-            let (r, model) =
-                evaluate_fold(dataset, &features, &name, &train_set, &test_set, config)?;
-            if split == "random" && !sources.is_empty() {
-                progress("comparing with the optimiser on whole clips");
-                comparison = compare(dataset, &model, &te, sources, config.compare_per_pair)?;
-            }
-            results.push(r);
+            tasks.push(Task {
+                split,
+                name,
+                train,
+                test,
+            });
         }
-        let k = results.len().max(1) as f64;
-        let avg = |f: &dyn Fn(&FoldResult) -> f64| results.iter().map(f).sum::<f64>() / k;
-        splits.push(SplitResult {
-            split: split.to_string(),
-            retarget: RetargetMetrics {
-                e_r_m: avg(&|r| r.retarget.e_r_m),
-                e_b_m: avg(&|r| r.retarget.e_b_m),
-                jpd_m: mean_opt(results.iter().map(|r| r.retarget.jpd_m)),
-                fid: avg(&|r| r.retarget.fid),
-            },
-            generation: GenerationMetrics {
-                e_b_m: avg(&|r| r.generation.e_b_m),
-                jpd_m: mean_opt(results.iter().map(|r| r.generation.jpd_m)),
-                fid: avg(&|r| r.generation.fid),
-            },
-            optimiser_jpd_m: mean_opt(results.iter().map(|r| r.optimiser_jpd_m)),
-            fid_data: avg(&|r| r.fid_data),
-            folds: results,
-        });
     }
-    Ok(EvalReport {
+    let progress = std::sync::Mutex::new(progress);
+    let say = |msg: &str| {
+        if let Ok(mut p) = progress.lock() {
+            (*p)(msg);
+        }
+    };
+    let done: std::sync::Mutex<Vec<Option<FoldResult>>> =
+        std::sync::Mutex::new(vec![None; tasks.len()]);
+    let comparison = std::sync::Mutex::new(Vec::new());
+    let on_split = std::sync::Mutex::new(on_split);
+    let assemble = |done: &[Option<FoldResult>]| -> Vec<SplitResult> {
+        let mut splits = Vec::new();
+        for split in SPLITS {
+            let mine: Vec<usize> = (0..tasks.len())
+                .filter(|&i| tasks[i].split == split)
+                .collect();
+            if mine.is_empty() || mine.iter().any(|&i| done[i].is_none()) {
+                continue;
+            }
+            let results: Vec<FoldResult> = mine.iter().filter_map(|&i| done[i].clone()).collect();
+            splits.push(split_result(split, results));
+        }
+        splits
+    };
+    let jobs = config.jobs.max(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .thread_name(|i| format!("interaction-eval-{i}"))
+        .build()
+        .map_err(|e| ModelError::Data(format!("cannot start the evaluation threads: {e}")))?;
+    use rayon::prelude::*;
+    pool.install(|| {
+        (0..tasks.len())
+            .into_par_iter()
+            .try_for_each(|i| -> Result<()> {
+                let t = &tasks[i];
+                say(&format!(
+                    "{} {}: training on {} windows, testing on {}",
+                    t.split,
+                    t.name,
+                    t.train.len(),
+                    t.test.len()
+                ));
+                let (r, model) =
+                    evaluate_fold(dataset, &features, &t.name, &t.train, &t.test, config)?;
+                if t.split == "random" && !sources.is_empty() {
+                    say("comparing with the optimiser on whole clips");
+                    let held: std::collections::BTreeSet<(usize, usize)> =
+                        t.test.iter().map(|s| (s.pair, s.variation)).collect();
+                    let keep: Keep = Box::new(move |p, v| held.contains(&(p, v)));
+                    let rows = compare(dataset, &model, &keep, sources, config.compare_per_pair)?;
+                    if let Ok(mut c) = comparison.lock() {
+                        *c = rows;
+                    }
+                }
+                say(&format!(
+                    "{} {}: done in {:.0} s",
+                    t.split, t.name, r.train_s
+                ));
+                let snapshot = {
+                    let mut d = done
+                        .lock()
+                        .map_err(|_| ModelError::Data("a fold panicked".into()))?;
+                    d[i] = Some(r);
+                    d.clone()
+                };
+                let rows = comparison.lock().map(|c| c.clone()).unwrap_or_default();
+                if let Ok(mut cb) = on_split.lock() {
+                    (*cb)(&report(
+                        dataset,
+                        config,
+                        &quality,
+                        &assemble(&snapshot),
+                        &rows,
+                        start,
+                    ));
+                }
+                Ok(())
+            })
+    })?;
+    let done = done
+        .into_inner()
+        .map_err(|_| ModelError::Data("a fold panicked".into()))?;
+    let rows = comparison.into_inner().unwrap_or_default();
+    Ok(report(
+        dataset,
+        config,
+        &quality,
+        &assemble(&done),
+        &rows,
+        start,
+    ))
+}
+
+fn split_result(split: &str, results: Vec<FoldResult>) -> SplitResult {
+    let k = results.len().max(1) as f64;
+    let avg = |f: &dyn Fn(&FoldResult) -> f64| results.iter().map(f).sum::<f64>() / k;
+    SplitResult {
+        split: split.to_string(),
+        retarget: RetargetMetrics {
+            e_r_m: avg(&|r| r.retarget.e_r_m),
+            e_b_m: avg(&|r| r.retarget.e_b_m),
+            jpd_m: mean_opt(results.iter().map(|r| r.retarget.jpd_m)),
+            fid: avg(&|r| r.retarget.fid),
+        },
+        generation: GenerationMetrics {
+            e_b_m: avg(&|r| r.generation.e_b_m),
+            jpd_m: mean_opt(results.iter().map(|r| r.generation.jpd_m)),
+            fid: avg(&|r| r.generation.fid),
+        },
+        optimiser_jpd_m: mean_opt(results.iter().map(|r| r.optimiser_jpd_m)),
+        fid_data: avg(&|r| r.fid_data),
+        folds: results,
+    }
+}
+
+fn report(
+    dataset: &Dataset,
+    config: &EvalConfig,
+    quality: &FeatureQuality,
+    splits: &[SplitResult],
+    comparison: &[CompareRow],
+    start: Instant,
+) -> EvalReport {
+    EvalReport {
         dataset: DatasetSummary {
             pairs: dataset
                 .pairs
@@ -523,17 +634,17 @@ fn evaluate_here(
                 .map(|p| (p.name.clone(), p.frames, p.variations.len()))
                 .collect(),
             fps: dataset.config.fps,
-            window: w,
+            window: config.train.window,
             train_stride: config.train.stride,
             test_stride: config.test_stride,
             build_wall_s: dataset.build_wall_s,
         },
         config: config.clone(),
-        feature_net: quality,
-        splits,
-        comparison,
+        feature_net: *quality,
+        splits: splits.to_vec(),
+        comparison: comparison.to_vec(),
         wall_s: start.elapsed().as_secs_f64(),
-    })
+    }
 }
 
 /// Whole-clip variations by the model next to the optimiser's, on held-out variations.

@@ -149,6 +149,9 @@ struct EvalArgs {
     /// Training steps of the FID feature network.
     #[arg(long, default_value_t = 300)]
     feature_steps: usize,
+    /// Folds trained at once (each on one thread).
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
     /// Only these splits (random, cross_scale, cross_interaction, cross_scale_interaction).
     #[arg(long = "split")]
     splits: Vec<String>,
@@ -547,18 +550,35 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
         feature_steps: args.feature_steps,
+        jobs: args.jobs,
         test_stride: (args.window / 2).max(1),
         seed: args.seed,
         ..Default::default()
     };
-    let mut progress = |msg: &str| eprintln!("{msg}");
-    let report =
-        interaction_model::eval::evaluate(&data, &config, &args.splits, &sources, &mut progress)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    write_json(&args.out.join("eval.json"), &report)?;
-    let md = interaction_model::eval::markdown(&report);
-    write_atomic(&args.out.join("eval.md"), md.as_bytes())?;
+    let save = |report: &interaction_model::eval::EvalReport| -> anyhow::Result<String> {
+        write_json(&args.out.join("eval.json"), report)?;
+        let md = interaction_model::eval::markdown(report);
+        write_atomic(&args.out.join("eval.md"), md.as_bytes())?;
+        Ok(md)
+    };
+    let mut progress = |msg: &str| eprintln!("{msg}");
+    // Partial results after each split: a long run that is stopped keeps them.
+    let mut on_split = |report: &interaction_model::eval::EvalReport| {
+        if let Err(e) = save(report) {
+            eprintln!("warning: cannot save partial results: {e:#}");
+        }
+    };
+    let report = interaction_model::eval::evaluate(
+        &data,
+        &config,
+        &args.splits,
+        &sources,
+        &mut progress,
+        &mut on_split,
+    )?;
+    let md = save(&report)?;
     crate::output::print_stdout(&md)?;
     Ok(())
 }
