@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use motion::{Motion, Unit};
 
 /// How to read input clips.
@@ -27,7 +26,8 @@ impl ClipArgs {
             unit: self.unit,
             fps: Some(self.amc_fps),
         };
-        motion::io::load(path, &options).with_context(|| format!("cannot read {}", path.display()))
+        // Motion errors name the file (and line) themselves.
+        Ok(motion::io::load(path, &options)?)
     }
 }
 

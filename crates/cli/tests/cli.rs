@@ -60,6 +60,13 @@ fn amc_without_skeleton_is_a_clear_error() {
 }
 
 #[test]
+fn a_missing_file_is_named_once() {
+    let err = failed(motionaug(&["metrics", "no/such/clip.bvh"]));
+    assert_eq!(err.matches("no/such/clip.bvh").count(), 1, "{err}");
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+}
+
+#[test]
 fn bad_bvh_names_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.bvh");
