@@ -4,12 +4,14 @@
 //! the same graph in Postgres and hands its jobs to workers that call the same
 //! stage functions.
 
+pub mod codec;
 pub mod manifest;
 pub mod plan;
 pub mod recipe;
 pub mod run;
 pub mod stages;
 
+pub use codec::{decode_clip, encode_clip};
 pub use manifest::{CorrectionSummary, ManifestEntry};
 pub use plan::{JobKind, Plan, PlannedJob, plan};
 pub use recipe::{CorrectStep, InteractionStep, Recipe, ResidualKind, VaeStep};

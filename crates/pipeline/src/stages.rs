@@ -180,11 +180,30 @@ pub fn correct(
     warm_start: Option<&Path>,
     on_progress: impl FnMut(&correct::job::ProgressEvent),
 ) -> Result<correct::Outcome, PipelineError> {
+    correct_with_config(
+        step.config(seed),
+        name,
+        motion,
+        dir,
+        warm_start,
+        on_progress,
+    )
+}
+
+/// [`correct`] with the job's settings given whole (the service's workers
+/// shorten `checkpoint_every_s` so that another worker can resume a job).
+pub fn correct_with_config(
+    mut config: correct::CorrectConfig,
+    name: &str,
+    motion: &Motion,
+    dir: &Path,
+    warm_start: Option<&Path>,
+    on_progress: impl FnMut(&correct::job::ProgressEvent),
+) -> Result<correct::Outcome, PipelineError> {
     if let Some(done) = finished_correction(motion, dir)? {
         tracing::info!(clip = name, "correction already finished; reused");
         return Ok(done);
     }
-    let mut config = step.config(seed);
     config.warm_start = warm_start
         .filter(|d| ppo::latest_checkpoint(d).ok().flatten().is_some())
         .map(Path::to_path_buf);

@@ -8,6 +8,8 @@
 //!   `running` under the same epoch. A late report from an expired lease is refused.
 //! * The reaper returns jobs whose lease expired to the queue (or fails them once
 //!   they used all their attempts); a re-run resumes from the stored checkpoint.
+//! * A job runs once every job it depends on succeeded; when one fails for good,
+//!   every job waiting for it fails too, naming it.
 
 use std::time::Duration;
 
@@ -80,6 +82,70 @@ pub async fn claim(
     .bind(lease.as_secs_f64())
     .fetch_optional(db)
     .await
+}
+
+/// The outputs of the jobs `id` depends on: (key, kind, output).
+pub async fn dep_outputs(
+    db: &PgPool,
+    id: Uuid,
+) -> Result<Vec<(String, String, Value)>, sqlx::Error> {
+    let rows: Vec<(String, String, Option<Json<Value>>)> = sqlx::query_as(
+        "SELECT p.key, p.kind, p.output FROM job_dependencies d JOIN jobs p ON p.id = d.depends_on
+         WHERE d.job_id = $1 ORDER BY p.seq",
+    )
+    .bind(id)
+    .fetch_all(db)
+    .await?;
+    Ok(rows
+        .into_iter()
+        .map(|(k, kind, o)| (k, kind, o.map_or(Value::Null, |o| o.0)))
+        .collect())
+}
+
+/// An artifact named `name` of one of the jobs `id` depends on, for the current lease.
+pub async fn get_input(
+    db: &PgPool,
+    id: Uuid,
+    epoch: i64,
+    name: &str,
+) -> Result<(Lease, Option<Vec<u8>>), sqlx::Error> {
+    let mut tx = db.begin().await?;
+    let status = check_lease(&mut tx, id, epoch).await?;
+    let mut content = None;
+    if matches!(status, Lease::Current { .. }) {
+        content = sqlx::query_scalar(
+            "SELECT a.content FROM artifacts a
+             JOIN job_dependencies d ON d.depends_on = a.job_id
+             WHERE d.job_id = $1 AND a.name = $2",
+        )
+        .bind(id)
+        .bind(name)
+        .fetch_optional(&mut *tx)
+        .await?;
+    }
+    tx.commit().await?;
+    Ok((status, content))
+}
+
+/// Fails every job that (transitively) waits for `failed`, which failed for
+/// good: they can never run. Returns how many.
+async fn fail_dependents(
+    tx: &mut Transaction<'_, Postgres>,
+    failed: Uuid,
+) -> Result<u64, sqlx::Error> {
+    Ok(sqlx::query(
+        "WITH RECURSIVE down(id) AS (
+             SELECT job_id FROM job_dependencies WHERE depends_on = $1
+             UNION
+             SELECT d.job_id FROM job_dependencies d JOIN down ON d.depends_on = down.id)
+         UPDATE jobs SET state = 'failed', finished_at = now(), lease_expires_at = NULL,
+                error = 'not run: its input ' || (SELECT key FROM jobs WHERE id = $1) || ' failed'
+         WHERE id IN (SELECT id FROM down) AND state IN ('queued', 'running')",
+    )
+    .bind(failed)
+    .execute(&mut **tx)
+    .await?
+    .rows_affected())
 }
 
 /// Records that a worker is alive (for the worker-count metric).
@@ -346,6 +412,9 @@ pub async fn fail(
         .bind(backoff(retry_base, attempts).as_secs_f64())
         .execute(&mut *tx)
         .await?;
+        if state == "failed" {
+            fail_dependents(&mut tx, id).await?;
+        }
         new_state = Some(state.to_string());
     }
     tx.commit().await?;
@@ -382,7 +451,8 @@ pub struct Reaped {
 /// Returns jobs with an expired lease to the queue (or fails them when they have
 /// used all their attempts). Safe to run from every coordinator at once.
 pub async fn reap(db: &PgPool, retry_base: Duration) -> Result<Vec<Reaped>, sqlx::Error> {
-    sqlx::query_as(
+    let mut tx = db.begin().await?;
+    let reaped: Vec<Reaped> = sqlx::query_as(
         "WITH expired AS (
              SELECT id FROM jobs
              WHERE state = 'running' AND lease_expires_at < now()
@@ -398,8 +468,13 @@ pub async fn reap(db: &PgPool, retry_base: Duration) -> Result<Vec<Reaped>, sqlx
          RETURNING jobs.id, jobs.augmentation_id, jobs.kind, jobs.state",
     )
     .bind(retry_base.as_secs_f64())
-    .fetch_all(db)
-    .await
+    .fetch_all(&mut *tx)
+    .await?;
+    for job in reaped.iter().filter(|j| j.state == "failed") {
+        fail_dependents(&mut tx, job.id).await?;
+    }
+    tx.commit().await?;
+    Ok(reaped)
 }
 
 /// Cancels every unfinished job of the augmentation; returns how many changed.

@@ -2,7 +2,8 @@
 //!
 //! Zips are unpacked (with limits on entry count and unpacked size), every file is
 //! parsed with the motion crate's readers, AMC motions are paired with an ASF of
-//! the same upload, and every clip is checked against the frame limit. The first
+//! the same upload, every clip is checked against the frame limit, and the two
+//! clips of an interaction pair (`<stem>_A`, `<stem>_B`) must match in length. The first
 //! problem rejects the whole upload with an error naming the file and line, so a
 //! dataset is stored complete or not at all.
 
@@ -257,7 +258,30 @@ pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Parse
             skeleton: skeleton_file.map(|f| f.bytes.clone()),
         });
     }
+    check_pairs(&clips)?;
     Ok(clips)
+}
+
+/// Two-person pairs (`<stem>_A` / `<stem>_B`, as `pipeline::plan::pairs` finds
+/// them) are animated together: both partners need the same frames and rate.
+fn check_pairs(clips: &[ParsedClip]) -> Result<(), ApiError> {
+    let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
+    for (stem, a, b) in pipeline::plan::pairs(&names) {
+        let find = |n: &str| clips.iter().find(|c| c.name == n);
+        let (Some(a), Some(b)) = (find(&a), find(&b)) else {
+            continue;
+        };
+        if a.frames != b.frames || (a.fps - b.fps).abs() > 1e-9 {
+            return Err(ApiError::unprocessable(format!(
+                "{} and {} form the two-person pair `{stem}` but differ: {} frames at {} fps \
+                 against {} frames at {} fps; the partners of a pair must have the same \
+                 frame count and rate",
+                a.source_name, b.source_name, a.frames, a.fps, b.frames, b.fps
+            ))
+            .with_file(&b.source_name));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

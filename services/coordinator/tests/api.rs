@@ -1352,3 +1352,170 @@ async fn dependent_jobs_wait_for_their_inputs() {
     );
     app.cleanup().await;
 }
+
+/// A recipe with every table becomes the graph of `pipeline::plan`: one
+/// `synthesize` job per clip, VAE per class, interaction per pair, a correction
+/// per original and per new (non-interaction) clip, debiasing; dependents wait
+/// for their inputs, and when an input fails for good its dependents fail too.
+#[tokio::test]
+async fn full_recipes_become_the_job_graph() {
+    let app = spawn_app(&[]).await;
+    let files = [
+        ("walk_1.bvh", bvh(40)),
+        ("walk_2.bvh", bvh(30)),
+        ("shake_A.bvh", bvh(20)),
+        ("shake_B.bvh", bvh(20)),
+    ];
+    let r = app.upload(&app.key, &files).await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let dataset: Value = r.json().await.unwrap();
+    let dataset = dataset["id"].as_str().unwrap();
+    let recipe = json!({
+        "seed": 5,
+        "ops": [{"op": "noise", "copies": 2}],
+        "vae": {"copies": 3, "iterations": 1},
+        "interaction": {"copies": 2},
+        "correct": {"time_budget_s": 1, "envs": 2},
+        "debias": {"iterations": 1}
+    });
+    let r = app.augment(dataset, &recipe).await;
+    assert_eq!(r.status(), StatusCode::ACCEPTED);
+    let aug: Value = r.json().await.unwrap();
+    let aug = aug["id"].as_str().unwrap();
+    let status = app.status(aug).await;
+    // 4 clips x 2 noise copies + 3 VAE samples of class `walk` (the `shake_*`
+    // classes have one clip each, below `min_clips`) = 11 corrected clips.
+    let expected = json!({
+        "synthesize": 4, "vae": 1, "interaction": 1, "correct_original": 4,
+        "correct": 11, "debias_train": 1, "debias_apply": 11
+    });
+    assert_eq!(status["kinds"], expected, "{status}");
+    assert_eq!(status["jobs"]["total"], 33);
+    let deps: Vec<String> = sqlx::query_scalar(
+        "SELECT p.key FROM job_dependencies d JOIN jobs j ON j.id = d.job_id
+         JOIN jobs p ON p.id = d.depends_on
+         WHERE j.key = 'correct:walk_1__00_noise_001' ORDER BY p.key",
+    )
+    .fetch_all(&app.db)
+    .await
+    .unwrap();
+    assert_eq!(deps, ["correct_original:walk_1", "synthesize:walk_1"]);
+    let deps: i64 = sqlx::query_scalar(
+        "SELECT count(*) FROM job_dependencies d JOIN jobs j ON j.id = d.job_id
+         WHERE j.key = 'debias_train'",
+    )
+    .fetch_one(&app.db)
+    .await
+    .unwrap();
+    assert_eq!(deps, 4);
+    // Only jobs without inputs are claimable: the four syntheses first.
+    for expected in ["walk_1", "walk_2", "shake_A", "shake_B"] {
+        let job = app.claim().await.expect("a synthesize job");
+        assert_eq!(job["input"]["clip_name"], expected);
+        assert_eq!(job["deps"], json!([]));
+        if expected == "walk_1" {
+            let epoch = job["epoch"].as_i64().unwrap();
+            let body = json!({"epoch": epoch, "error": "unreadable", "retryable": false});
+            assert_eq!(app.report(&job, "fail", body).await, StatusCode::NO_CONTENT);
+        }
+    }
+    let r = app
+        .worker(reqwest::Method::POST, "/jobs/claim")
+        .json(&json!({"worker_id": "w", "kinds": ["correct", "debias_apply"], "wait_ms": 0}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        r.status(),
+        StatusCode::NO_CONTENT,
+        "corrections wait for synthesis"
+    );
+    let status = app.status(aug).await;
+    // walk_1's two corrections and their two debias_apply jobs can never run.
+    assert_eq!(status["jobs"]["failed"], 5, "{status}");
+    let skipped: Vec<&Value> = status["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["error"] == "not run: its input synthesize:walk_1 failed")
+        .collect();
+    assert_eq!(skipped.len(), 4, "{status}");
+    assert!(
+        skipped
+            .iter()
+            .any(|e| e["key"] == "debias_apply:walk_1__00_noise_000")
+    );
+    // Corrections of the originals need no other job: claimable at once, with
+    // the source clip in their input.
+    let original = {
+        let r = app
+            .worker(reqwest::Method::POST, "/jobs/claim")
+            .json(&json!({"worker_id": "w", "kinds": ["correct_original"], "wait_ms": 0}))
+            .send()
+            .await
+            .unwrap();
+        r.json::<Value>().await.unwrap()
+    };
+    assert_eq!(original["input"]["job"]["key"], "correct_original:walk_1");
+    assert_eq!(original["input"]["clips"][0]["clip_name"], "walk_1");
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn bad_tables_and_pairs_are_refused_with_the_field() {
+    let app = spawn_app(&[]).await;
+    let (dataset, _) = upload_one(&app).await;
+    let cases = [
+        (
+            json!({"ops": [{"op": "mirror"}], "correct": {"time_budget": 1}}),
+            "[correct]",
+            "time_budget",
+        ),
+        (json!({"vae": {"copies": 0}}), "[vae]", "copies"),
+        (
+            json!({"ops": [{"op": "mirror"}], "debias": {}}),
+            "[debias]",
+            "[correct]",
+        ),
+        (
+            json!({"ops": [{"op": "mirror"}], "correct": {"accept_threshold": 2}}),
+            "[correct]",
+            "accept_threshold",
+        ),
+        (
+            json!({"ops": [{"op": "mirror"}], "colour": 1}),
+            "recipe",
+            "colour",
+        ),
+    ];
+    for (recipe, field, mentions) in cases {
+        let (status, body) = problem(app.augment(&dataset, &recipe).await).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{recipe}: {body}");
+        assert_eq!(body["field"], field, "{recipe}: {body}");
+        assert!(
+            body["detail"].as_str().unwrap().contains(mentions),
+            "{recipe}: {body}"
+        );
+    }
+    // A VAE recipe on a dataset with no class of two clips makes nothing.
+    let (status, body) = problem(app.augment(&dataset, &json!({"vae": {}})).await).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(body["detail"].as_str().unwrap().contains("makes nothing"));
+    // The partners of a pair must match in length.
+    let r = app
+        .upload(&app.key, &[("hug_A.bvh", bvh(20)), ("hug_B.bvh", bvh(21))])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        body["detail"].as_str().unwrap().contains("pair `hug`"),
+        "{body}"
+    );
+    assert_eq!(body["file"], "hug_B.bvh");
+    let jobs: i64 = sqlx::query_scalar("SELECT count(*) FROM jobs")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(jobs, 0);
+    app.cleanup().await;
+}

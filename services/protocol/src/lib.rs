@@ -17,12 +17,34 @@ use uuid::Uuid;
 /// Path prefix of the worker API on the coordinator.
 pub const WORKER_API_PREFIX: &str = "/internal/v1";
 
-/// Job kinds the coordinator schedules and workers run.
+/// Job kinds the coordinator schedules and workers run: the kinds of
+/// `pipeline::JobKind` (the plan's per-output `synthesize` jobs of one clip run
+/// as one `synthesize` job, see docs/SERVICE.md).
 pub mod kinds {
     /// Kinematic synthesis of one clip with the augmentation's recipe.
     pub const SYNTHESIZE: &str = "synthesize";
+    /// Train the motion VAE on a class's clips, then sample.
+    pub const VAE: &str = "vae";
+    /// Body-size variations of a two-person pair.
+    pub const INTERACTION: &str = "interaction";
+    /// Physical correction of a source clip (warm start and debiasing data).
+    pub const CORRECT_ORIGINAL: &str = "correct_original";
+    /// Physical correction of a new clip.
+    pub const CORRECT: &str = "correct";
+    /// Train the debiasing network on (corrected original, original) pairs.
+    pub const DEBIAS_TRAIN: &str = "debias_train";
+    /// Remove the learned bias from one corrected clip.
+    pub const DEBIAS_APPLY: &str = "debias_apply";
     /// Every kind, for metrics and documentation.
-    pub const ALL: &[&str] = &[SYNTHESIZE];
+    pub const ALL: &[&str] = &[
+        SYNTHESIZE,
+        VAE,
+        INTERACTION,
+        CORRECT_ORIGINAL,
+        CORRECT,
+        DEBIAS_TRAIN,
+        DEBIAS_APPLY,
+    ];
 }
 
 /// `POST /internal/v1/jobs/claim`: ask for one runnable job.
@@ -57,6 +79,19 @@ pub struct ClaimedJob {
     /// Whether a previous attempt stored a checkpoint (fetch it with
     /// `GET /internal/v1/jobs/{id}/checkpoint?epoch=N`).
     pub has_checkpoint: bool,
+    /// The outputs of the jobs this one depends on (all succeeded).
+    #[serde(default)]
+    pub deps: Vec<DepOutput>,
+}
+
+/// A finished input of a claimed job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DepOutput {
+    /// The dependency's key in the plan (`correct_original:walk`, `synthesize:walk`, ...).
+    pub key: String,
+    pub kind: String,
+    /// Its [`JobOutput`].
+    pub output: serde_json::Value,
 }
 
 /// `POST /internal/v1/jobs/{id}/heartbeat`: extend the lease, report progress.
@@ -125,14 +160,71 @@ pub struct SynthesizeInput {
     pub seed: u64,
 }
 
-/// Output of a `synthesize` job.
+/// Input of every job kind but `synthesize`: one job of `pipeline::plan`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SynthesizeOutput {
-    /// Manifest entries of the outputs, in order, as the CLI writes them.
-    pub manifest: Vec<serde_json::Value>,
-    /// Names of the artifacts the job uploaded.
-    pub files: Vec<String>,
+pub struct PipelineInput {
+    /// The planned job (key, `pipeline::JobKind`, deps and outputs by key).
+    pub job: pipeline::PlannedJob,
+    /// The clip the job is about, when there is one (shown with errors).
+    pub clip_name: Option<String>,
+    /// The augmentation's recipe, as accepted by `POST /v1/datasets/{id}/augmentations`.
+    pub recipe: serde_json::Value,
+    pub seed: u64,
+    /// The stored source clips the job reads.
+    pub clips: Vec<ClipRef>,
 }
+
+/// A stored source clip (read with `GET /internal/v1/clips/{id}/source` and `/skeleton`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ClipRef {
+    pub clip_id: Uuid,
+    pub clip_name: String,
+    pub source_name: String,
+    pub skeleton_name: Option<String>,
+    pub format: ClipFormat,
+}
+
+/// A clip a job made for a later job (its correction, debiasing), stored
+/// losslessly (`pipeline::encode_clip`) as the artifact `file`, which is not
+/// part of the results.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkClip {
+    pub name: String,
+    pub file: String,
+    /// Its manifest entry so far (`pipeline::ManifestEntry`).
+    pub entry: serde_json::Value,
+}
+
+/// Output of every job kind.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct JobOutput {
+    /// Manifest entries (`pipeline::ManifestEntry`) of the final outputs it made.
+    pub manifest: Vec<serde_json::Value>,
+    /// Artifacts that go into the results zip.
+    pub files: Vec<String>,
+    /// Clips made for later jobs.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clips: Vec<WorkClip>,
+    /// Other artifacts for later jobs (correction checkpoints, the debiasing model).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub work: Vec<String>,
+    /// Clips whose correction was not accepted and that were left out.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rejected: Vec<String>,
+}
+
+impl JobOutput {
+    /// Every artifact the output names (all must have been uploaded by the job).
+    pub fn all_files(&self) -> Vec<String> {
+        let mut all = self.files.clone();
+        all.extend(self.clips.iter().map(|c| c.file.clone()));
+        all.extend(self.work.iter().cloned());
+        all
+    }
+}
+
+/// Output of a `synthesize` job.
+pub type SynthesizeOutput = JobOutput;
 
 /// Checkpoint of a `synthesize` job: outputs `0..done` are uploaded, with their
 /// manifest entries and file names, so a resumed attempt continues at `done`.
@@ -141,4 +233,7 @@ pub struct SynthesizeCheckpoint {
     pub done: usize,
     pub manifest: Vec<serde_json::Value>,
     pub files: Vec<String>,
+    /// Outputs kept for their correction instead (recipes with `[correct]`).
+    #[serde(default)]
+    pub clips: Vec<WorkClip>,
 }

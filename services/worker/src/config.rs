@@ -20,6 +20,13 @@ pub struct WorkerConfig {
     /// `MOTIONAUG_WORKER_TEST_DELAY_MS` (TEST ONLY): sleep this long before storing each
     /// output, so tests can kill a worker in the middle of a job. Never set it in production.
     pub test_delay: Option<Duration>,
+    /// `MOTIONAUG_WORKER_WORK_DIR`: scratch space of running jobs (default: the
+    /// system temp dir + `motionaug-worker`).
+    pub work_dir: std::path::PathBuf,
+    /// `MOTIONAUG_WORKER_CHECKPOINT_EVERY_S`: how often a correction stores and
+    /// uploads a checkpoint (default 30; at most this much training is redone
+    /// when a worker dies).
+    pub checkpoint_every: Duration,
 }
 
 impl WorkerConfig {
@@ -76,6 +83,12 @@ impl WorkerConfig {
                 30_000,
             )?),
             test_delay,
+            work_dir: get("MOTIONAUG_WORKER_WORK_DIR")
+                .map(std::path::PathBuf::from)
+                .unwrap_or_else(|| std::env::temp_dir().join("motionaug-worker")),
+            checkpoint_every: Duration::from_secs(
+                number("MOTIONAUG_WORKER_CHECKPOINT_EVERY_S", 30)?.max(1),
+            ),
         })
     }
 }

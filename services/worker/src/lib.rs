@@ -6,10 +6,13 @@
 //! * [`client`]: the coordinator's internal worker API.
 //! * [`runner`]: claim loop, heartbeats, cancellation and shutdown.
 //! * [`synthesize`]: the `synthesize` job (kinematic synthesis of one clip).
+//! * [`stages`]: every other job kind of the augmentation's graph (VAE,
+//!   interaction, physical correction, debiasing).
 
 pub mod client;
 pub mod config;
 pub mod runner;
+pub mod stages;
 pub mod synthesize;
 
 pub use config::WorkerConfig;

@@ -14,10 +14,10 @@ use tracing::Instrument;
 
 use crate::client::{Coordinator, Reply, with_retries};
 use crate::config::WorkerConfig;
-use crate::synthesize;
+use crate::{stages, synthesize};
 
 /// Job kinds this worker runs.
-pub const KINDS: &[&str] = &[kinds::SYNTHESIZE];
+pub const KINDS: &[&str] = kinds::ALL;
 
 /// How long a claim request may wait for work on the coordinator.
 const CLAIM_WAIT: Duration = Duration::from_secs(20);
@@ -72,6 +72,10 @@ pub struct JobContext {
     pub test_delay: Option<Duration>,
     /// How long to keep retrying a report while the coordinator is unreachable.
     pub patience: Duration,
+    /// Local scratch space of jobs (corrections, models).
+    pub work_dir: std::path::PathBuf,
+    /// How often a correction stores a checkpoint (and uploads it).
+    pub checkpoint_every: Duration,
 }
 
 /// The result of running a job.
@@ -232,9 +236,12 @@ async fn run_claimed(
             control: control.clone(),
             test_delay: config.test_delay,
             patience,
+            work_dir: config.work_dir.clone(),
+            checkpoint_every: config.checkpoint_every,
         };
         let result = match job.kind.as_str() {
             kinds::SYNTHESIZE => synthesize::run(&ctx).await,
+            other if KINDS.contains(&other) => stages::run(&ctx).await,
             other => Err(JobFailure::permanent(format!("this worker cannot run jobs of kind `{other}`"))),
         };
         watcher.abort();

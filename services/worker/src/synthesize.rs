@@ -5,6 +5,10 @@
 //! manifest entries) is stored, so an attempt that dies resumes where the last one
 //! stopped. Every output has its own seed derived from (seed, clip, op, copy), so
 //! a resumed job produces exactly the files an uninterrupted run would.
+//!
+//! When the recipe has `[correct]`, the outputs are not final: each is stored
+//! losslessly (`pipeline::encode_clip`) as `work/clips/<name>.npz` for its
+//! `correct` job instead of as BVH and NPZ.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -15,7 +19,7 @@ use crate::client::{Reply, with_retries};
 use crate::runner::{JobContext, JobFailure, Outcome, Stop};
 
 /// Turns a reply into "go on" or "stop"; records why the job must stop.
-fn proceed(ctx: &JobContext, reply: Reply<()>) -> bool {
+pub(crate) fn proceed(ctx: &JobContext, reply: Reply<()>) -> bool {
     match reply {
         Reply::Ok(()) => true,
         Reply::Cancelled => {
@@ -29,7 +33,10 @@ fn proceed(ctx: &JobContext, reply: Reply<()>) -> bool {
     }
 }
 
-async fn fetch(ctx: &JobContext, path: &str) -> Result<Option<Option<Vec<u8>>>, JobFailure> {
+pub(crate) async fn fetch(
+    ctx: &JobContext,
+    path: &str,
+) -> Result<Option<Option<Vec<u8>>>, JobFailure> {
     let reply = with_retries(path, ctx.patience, || ctx.coordinator.get(path))
         .await
         .map_err(|e| JobFailure::transient(e.to_string()))?;
@@ -56,7 +63,11 @@ impl<T> CloneUnit for Reply<T> {
     }
 }
 
-async fn upload(ctx: &JobContext, path: &str, body: Vec<u8>) -> Result<bool, JobFailure> {
+pub(crate) async fn upload(
+    ctx: &JobContext,
+    path: &str,
+    body: Vec<u8>,
+) -> Result<bool, JobFailure> {
     let reply = with_retries(path, ctx.patience, || {
         ctx.coordinator.put(path, body.clone())
     })
@@ -66,7 +77,7 @@ async fn upload(ctx: &JobContext, path: &str, body: Vec<u8>) -> Result<bool, Job
 }
 
 /// Sleeps for the test-only delay, in small steps so a stop is noticed promptly.
-async fn test_pause(ctx: &JobContext) {
+pub(crate) async fn test_pause(ctx: &JobContext) {
     let Some(delay) = ctx.test_delay else { return };
     let until = Instant::now() + delay;
     while Instant::now() < until && ctx.control.stop_reason().is_none() {
@@ -102,7 +113,7 @@ pub async fn run(ctx: &JobContext) -> Result<Outcome, JobFailure> {
         };
         if let Some(bytes) = bytes {
             match serde_json::from_slice::<SynthesizeCheckpoint>(&bytes) {
-                Ok(c) if c.manifest.len() == c.done => checkpoint = c,
+                Ok(c) if c.manifest.len() + c.clips.len() == c.done => checkpoint = c,
                 _ => tracing::warn!("checkpoint unreadable; starting over"),
             }
         }
@@ -121,7 +132,12 @@ pub async fn run(ctx: &JobContext) -> Result<Outcome, JobFailure> {
     .map_err(|e| JobFailure::transient(format!("clip reader crashed: {e}")))?
     .map_err(|e| JobFailure::permanent(format!("cannot read the clip: {e}")))?;
     let motion = Arc::new(motion);
-    let plan = recipe.jobs(&input.clip_name, input.seed);
+    let synth_recipe = recipe
+        .synth
+        .as_ref()
+        .ok_or_else(|| JobFailure::permanent("the recipe has no [[ops]]"))?;
+    let plan = synth_recipe.jobs(&input.clip_name, input.seed);
+    let keep_for_correction = recipe.correct.is_some();
     let total = plan.len();
     if checkpoint.done > total {
         tracing::warn!(
@@ -142,13 +158,10 @@ pub async fn run(ctx: &JobContext) -> Result<Outcome, JobFailure> {
         }
         let (recipe, motion, clip) = (recipe.clone(), motion.clone(), input.clip_name.clone());
         let source_name = input.source_name.clone();
-        let (files, entry) = tokio::task::spawn_blocking(move || {
-            let generated =
-                synth::run_job(&recipe, &clip, &motion, step).map_err(|e| e.to_string())?;
-            let (files, entry) = motionaug_protocol::recipe::output_files(&generated, &source_name)
-                .map_err(|e| format!("cannot encode output {}: {e}", generated.name))?;
-            let entry = serde_json::to_value(entry).map_err(|e| e.to_string())?;
-            Ok::<_, String>((files, entry))
+        let made = tokio::task::spawn_blocking(move || {
+            let made = pipeline::stages::synthesize(&recipe, &clip, &source_name, &motion, step)
+                .map_err(|e| e.to_string())?;
+            crate::stages::finished_or_kept(made, keep_for_correction)
         })
         .await
         .map_err(|e| JobFailure::transient(format!("synthesis crashed: {e}")))?
@@ -157,14 +170,17 @@ pub async fn run(ctx: &JobContext) -> Result<Outcome, JobFailure> {
         if ctx.control.stop_reason().is_some() {
             return Ok(Outcome::Stopped);
         }
-        for (name, bytes) in files {
+        for (name, bytes) in made.files {
             let path = format!("/jobs/{}/artifacts/{name}?epoch={}", job.id, job.epoch);
             if !upload(ctx, &path, bytes).await? {
                 return Ok(Outcome::Stopped);
             }
-            checkpoint.files.push(name);
+            if made.work_clip.is_none() {
+                checkpoint.files.push(name);
+            }
         }
-        checkpoint.manifest.push(entry);
+        checkpoint.manifest.extend(made.entry);
+        checkpoint.clips.extend(made.work_clip);
         checkpoint.done = index + 1;
         let body = serde_json::to_vec(&checkpoint)
             .map_err(|e| JobFailure::transient(format!("cannot encode checkpoint: {e}")))?;
@@ -178,6 +194,8 @@ pub async fn run(ctx: &JobContext) -> Result<Outcome, JobFailure> {
     let output = SynthesizeOutput {
         manifest: checkpoint.manifest,
         files: checkpoint.files,
+        clips: checkpoint.clips,
+        ..SynthesizeOutput::default()
     };
     serde_json::to_value(output)
         .map(Outcome::Done)

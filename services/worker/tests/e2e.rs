@@ -53,6 +53,12 @@ fn main() {
             block_on(redis_flushed_and_restarted())
         }),
         ("two_coordinators", || block_on(two_coordinators())),
+        ("correction_graph_on_two_workers", || {
+            block_on(correction_graph_on_two_workers())
+        }),
+        ("worker_killed_mid_correction", || {
+            block_on(worker_killed_mid_correction())
+        }),
     ];
     let started = Instant::now();
     let (mut passed, mut failed, mut filtered) = (0, 0, 0);
@@ -320,6 +326,11 @@ impl Cluster {
             .env("MOTIONAUG_WORKER_TOKEN", TOKEN)
             .env("MOTIONAUG_WORKER_ID", id)
             .env("MOTIONAUG_WORKER_TEST_DELAY_MS", delay_ms.to_string())
+            .env("MOTIONAUG_WORKER_CHECKPOINT_EVERY_S", "1")
+            .env(
+                "MOTIONAUG_WORKER_WORK_DIR",
+                self.dir.join(format!("work-{id}")),
+            )
             .env("RUST_LOG", "info")
             .stdout(self.log(id)?)
             .stderr(self.log(id)?)
@@ -333,8 +344,16 @@ impl Cluster {
     }
 
     async fn upload_and_augment(&self) -> anyhow::Result<String> {
+        self.upload_and_augment_with(CLIPS, &recipe()).await
+    }
+
+    async fn upload_and_augment_with(
+        &self,
+        clips: &[&str],
+        recipe: &Value,
+    ) -> anyhow::Result<String> {
         let mut form = Form::new().text("name", "e2e");
-        for name in ["HDM_bd.asf"].iter().chain(CLIPS) {
+        for name in ["HDM_bd.asf"].iter().chain(clips) {
             let bytes = std::fs::read(examples().join(name))?;
             form = form.part("file", Part::bytes(bytes).file_name(name.to_string()));
         }
@@ -353,7 +372,7 @@ impl Cluster {
         );
         let dataset: Value = r.json().await?;
         ensure!(
-            dataset["clips"].as_array().map(Vec::len) == Some(CLIPS.len()),
+            dataset["clips"].as_array().map(Vec::len) == Some(clips.len()),
             "clips: {dataset}"
         );
         let r = self
@@ -363,7 +382,7 @@ impl Cluster {
                 dataset["id"].as_str().unwrap()
             )))
             .bearer_auth(&self.key)
-            .json(&recipe())
+            .json(recipe)
             .send()
             .await?;
         ensure!(
@@ -547,15 +566,12 @@ impl Drop for Cluster {
     }
 }
 
-/// What an uninterrupted run produces: every file by name, and manifest.json.
-fn expected_outputs() -> anyhow::Result<(BTreeMap<String, Vec<u8>>, String)> {
-    let recipe =
-        motionaug_protocol::recipe::parse(&recipe()).map_err(|e| anyhow::anyhow!(e.message))?;
-    let seed = recipe.effective_seed(None);
+/// The example clips as `motionaug augment` reads them (named by file stem,
+/// `source` = the file name, as the service records uploads).
+fn local_clips(names: &[&str]) -> anyhow::Result<Vec<pipeline::Clip>> {
     let asf = std::fs::read(examples().join("HDM_bd.asf"))?;
-    let mut files = BTreeMap::new();
-    let mut entries = Vec::new();
-    for name in CLIPS {
+    let mut clips = Vec::new();
+    for name in names {
         let bytes = std::fs::read(examples().join(name))?;
         let (format, skeleton) = if name.ends_with(".amc") {
             (
@@ -566,15 +582,59 @@ fn expected_outputs() -> anyhow::Result<(BTreeMap<String, Vec<u8>>, String)> {
             (motionaug_protocol::ClipFormat::Bvh, None)
         };
         let motion = motionaug_protocol::clip::load(format, name, &bytes, skeleton)?;
-        let clip = name.rsplit_once('.').unwrap().0;
-        for job in recipe.jobs(clip, seed) {
-            let generated = synth::run_job(&recipe, clip, &motion, job)?;
-            let (out, entry) = motionaug_protocol::recipe::output_files(&generated, name)?;
-            files.extend(out);
-            entries.push(serde_json::to_value(entry)?);
-        }
+        clips.push(pipeline::Clip {
+            name: name.rsplit_once('.').unwrap().0.to_string(),
+            source: name.to_string(),
+            motion,
+        });
     }
-    Ok((files, motionaug_protocol::recipe::manifest_json(entries)?))
+    Ok(clips)
+}
+
+/// Runs `recipe` on `clips` in this process with `pipeline::run`, the code of
+/// `motionaug augment`, writing into `out`. Returns the wall time.
+fn local_run(recipe: &Value, clips: &[&str], out: &Path) -> anyhow::Result<Duration> {
+    let recipe =
+        motionaug_protocol::recipe::parse(recipe).map_err(|e| anyhow::anyhow!(e.message))?;
+    let clips = local_clips(clips)?;
+    let started = Instant::now();
+    let summary = pipeline::run(
+        &recipe,
+        &clips,
+        &pipeline::Options {
+            out: Some(out),
+            work: &out.join("work"),
+            seed: recipe.effective_seed(None),
+            on_event: &|_| {},
+        },
+    )?;
+    ensure!(
+        summary.failures.is_empty(),
+        "local run: {:?}",
+        summary.failures
+    );
+    Ok(started.elapsed())
+}
+
+/// What an uninterrupted run produces: every output file by name, and manifest.json.
+fn expected_outputs() -> anyhow::Result<(BTreeMap<String, Vec<u8>>, String)> {
+    let out = std::env::temp_dir().join(format!("motionaug-e2e-local-{}", Uuid::new_v4()));
+    std::fs::create_dir_all(&out)?;
+    let result = (|| {
+        local_run(&recipe(), CLIPS, &out)?;
+        let mut files = BTreeMap::new();
+        for entry in std::fs::read_dir(&out)? {
+            let path = entry?.path();
+            let name = path.file_name().unwrap().to_string_lossy().to_string();
+            if path.is_file() && name != "manifest.json" {
+                files.insert(name, std::fs::read(&path)?);
+            }
+        }
+        let manifest = std::fs::read_to_string(out.join("manifest.json"))?;
+        Ok((files, manifest))
+    })();
+    let _ = std::fs::remove_dir_all(&out);
+    result
 }
 
 async fn with_cluster<F, Fut>(f: F) -> anyhow::Result<()>
@@ -778,6 +838,227 @@ async fn two_coordinators() -> anyhow::Result<()> {
             .fetch_all(&c.db)
             .await?;
             ensure!(workers == ["w-other"], "jobs ran on {workers:?}");
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// The clip the correction scenarios augment (the shortest example clip).
+const CORRECT_CLIPS: &[&str] = &["HDM_bd_kickLFront1Reps_001_120.amc"];
+
+/// A tiny correction recipe: stop at the first accepted evaluation
+/// (`target_r_norm = 0`, `accept_threshold = 0`), keep every corrected clip.
+fn correct_recipe() -> Value {
+    json!({
+        "seed": 3,
+        "ops": [{"op": "mirror"}],
+        "correct": {"time_budget_s": 1, "envs": 2, "target_r_norm": 0,
+                    "accept_threshold": 0, "keep_rejected": true},
+        "debias": {"iterations": 20}
+    })
+}
+
+/// Every file of a results zip by name.
+async fn download(c: &Cluster, aug: &str) -> anyhow::Result<BTreeMap<String, Vec<u8>>> {
+    let r = c
+        .http
+        .get(c.url(&format!("/v1/augmentations/{aug}/results")))
+        .bearer_auth(&c.key)
+        .send()
+        .await?;
+    let status = r.status();
+    ensure!(
+        status.is_success(),
+        "results: {status}: {}",
+        r.text().await?
+    );
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(r.bytes().await?.to_vec()))?;
+    let mut files = BTreeMap::new();
+    for i in 0..zip.len() {
+        let mut f = zip.by_index(i)?;
+        let mut content = Vec::new();
+        f.read_to_end(&mut content)?;
+        files.insert(f.name()?.to_string(), content);
+    }
+    Ok(files)
+}
+
+/// A manifest with the measured numbers of each correction blanked: what a
+/// correction measures depends on wall-clock time (its budget), so two runs
+/// agree on everything else but not on these.
+fn manifest_structure(text: &[u8]) -> anyhow::Result<Value> {
+    let mut v: Value = serde_json::from_slice(text)?;
+    for entry in v.as_array_mut().context("manifest is a list")? {
+        if let Some(c) = entry.get_mut("correction").and_then(Value::as_object_mut) {
+            for (key, value) in c.iter_mut() {
+                if value.is_number() || value.is_boolean() {
+                    *value = json!(format!("<{key}>"));
+                }
+            }
+        }
+    }
+    Ok(v)
+}
+
+/// Every job completed exactly once, and the counts per kind are `kinds`.
+async fn check_jobs(c: &Cluster, kinds: &[(&str, i64)]) -> anyhow::Result<()> {
+    let jobs: Vec<(String, String, i32)> =
+        sqlx::query_as("SELECT key, state, completions FROM jobs ORDER BY seq")
+            .fetch_all(&c.db)
+            .await?;
+    for (key, state, completions) in &jobs {
+        ensure!(
+            state == "succeeded" && *completions == 1,
+            "{key}: {state}, {completions} completions"
+        );
+    }
+    for (kind, n) in kinds {
+        let count: i64 = sqlx::query_scalar("SELECT count(*) FROM jobs WHERE kind = $1")
+            .bind(kind)
+            .fetch_one(&c.db)
+            .await?;
+        ensure!(count == *n, "{count} {kind} jobs, expected {n}");
+    }
+    Ok(())
+}
+
+/// Synthesis, correction of the original and of the new clip (warm-started
+/// from the original's policy), debias training and application on two real
+/// workers; the results hold the same files and the same manifest (but for
+/// the correction's measured numbers) as `pipeline::run` in this process.
+async fn correction_graph_on_two_workers() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            c.start_worker("w1", 0)?;
+            let started = Instant::now();
+            let aug = c
+                .upload_and_augment_with(CORRECT_CLIPS, &correct_recipe())
+                .await?;
+            c.wait_for(&aug, "succeeded", Duration::from_secs(300))
+                .await?;
+            let service_s = started.elapsed().as_secs_f64();
+            check_jobs(
+                &c,
+                &[
+                    ("synthesize", 1),
+                    ("correct_original", 1),
+                    ("correct", 1),
+                    ("debias_train", 1),
+                    ("debias_apply", 1),
+                ],
+            )
+            .await?;
+            let got = download(&c, &aug).await?;
+            let out = c.dir.join("local");
+            std::fs::create_dir_all(&out)?;
+            let local_s = local_run(&correct_recipe(), CORRECT_CLIPS, &out)?.as_secs_f64();
+            let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
+            let expected: Vec<String> = [
+                format!("{clip}.bvh"),
+                format!("{clip}.npz"),
+                format!("work/correct/{clip}/report.json"),
+                "manifest.json".to_string(),
+            ]
+            .into_iter()
+            .collect();
+            let names: Vec<String> = got.keys().cloned().collect();
+            let mut expected_sorted = expected.clone();
+            expected_sorted.sort();
+            ensure!(names == expected_sorted, "results hold {names:?}");
+            for name in &expected {
+                ensure!(out.join(name).is_file(), "the local run has no {name}");
+            }
+            let ours = manifest_structure(&got["manifest.json"])?;
+            let local = manifest_structure(&std::fs::read(out.join("manifest.json"))?)?;
+            ensure!(
+                ours == local,
+                "manifests differ:\nservice {ours:#}\nlocal {local:#}"
+            );
+            ensure!(ours[0]["debiased"] == true, "{ours}");
+            // The report the manifest names is the correction's own.
+            let report: Value =
+                serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
+            let manifest: Value = serde_json::from_slice(&got["manifest.json"])?;
+            ensure!(
+                report["r_norm"] == manifest[0]["correction"]["r_norm"],
+                "report {report} vs manifest {manifest}"
+            );
+            // Warm start: the variant's correction started from the original's policy.
+            ensure!(
+                report["warm_start"].is_string(),
+                "the variant was not warm-started: {report}"
+            );
+            println!(
+                "  correction graph: service (2 workers) {service_s:.1} s, \
+                 pipeline::run in one process {local_s:.1} s"
+            );
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// SIGKILL the worker of a correction once it uploaded a checkpoint: the lease
+/// expires and the other worker resumes the training from that checkpoint.
+/// (A PPO iteration of 4096 samples takes several seconds here and checkpoints
+/// are written between iterations, so the budget allows a few iterations.)
+async fn worker_killed_mid_correction() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            c.start_worker("w1", 0)?;
+            let recipe = json!({
+                "seed": 4,
+                "ops": [{"op": "mirror"}],
+                "correct": {"time_budget_s": 25, "envs": 2, "target_r_norm": 1,
+                            "accept_threshold": 0, "keep_rejected": true,
+                            "warm_start": false}
+            });
+            let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
+            let deadline = Instant::now() + Duration::from_secs(120);
+            let (job, worker) = loop {
+                let row: Option<(Uuid, String)> = sqlx::query_as(
+                    "SELECT id, worker_id FROM jobs
+                     WHERE kind = 'correct' AND state = 'running' AND checkpoint IS NOT NULL",
+                )
+                .fetch_optional(&c.db)
+                .await?;
+                if let Some(row) = row {
+                    break row;
+                }
+                ensure!(
+                    Instant::now() < deadline,
+                    "no correction checkpoint; logs in {}",
+                    c.dir.display()
+                );
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            };
+            let mut child = c.workers.remove(&worker).context("worker process")?;
+            kill(&mut child);
+            c.wait_for(&aug, "succeeded", Duration::from_secs(300))
+                .await?;
+            check_jobs(&c, &[("synthesize", 1), ("correct", 1)]).await?;
+            let (attempts, survivor): (i32, String) =
+                sqlx::query_as("SELECT attempts, worker_id FROM jobs WHERE id = $1")
+                    .bind(job)
+                    .fetch_one(&c.db)
+                    .await?;
+            ensure!(attempts == 2, "the correction ran {attempts} time(s)");
+            ensure!(survivor != worker, "finished by the killed worker");
+            let log = std::fs::read_to_string(c.dir.join(format!("{survivor}.log")))?;
+            ensure!(
+                log.contains("resuming the correction from its checkpoint"),
+                "the second attempt did not resume; logs in {}",
+                c.dir.display()
+            );
+            let got = download(&c, &aug).await?;
+            ensure!(got.len() == 4, "results: {:?}", got.keys());
             Ok(())
         }
         .await;

@@ -1,6 +1,8 @@
-//! `/v1/augmentations`: start one over a dataset (one job per clip), follow it
+//! `/v1/augmentations`: start one over a dataset (the job graph of
+//! `pipeline::plan`), follow it
 //! (status, server-sent events), download its results, cancel it.
 
+use std::collections::{BTreeMap, HashMap};
 use std::convert::Infallible;
 use std::io::Write;
 use std::time::Duration;
@@ -13,7 +15,8 @@ use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use chrono::{DateTime, Utc};
 use futures_util::Stream;
-use motionaug_protocol::{SynthesizeInput, SynthesizeOutput, kinds};
+use motionaug_protocol::{ClipFormat, ClipRef, JobOutput, PipelineInput, SynthesizeInput, kinds};
+use pipeline::JobKind;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use tokio::sync::broadcast::error::RecvError;
@@ -39,6 +42,8 @@ pub struct JobCounts {
 #[derive(Debug, Serialize, Clone, PartialEq)]
 pub struct JobError {
     pub job: Uuid,
+    /// The job's key in the graph, e.g. `correct:walk__00_noise_000`.
+    pub key: String,
     pub clip: Option<String>,
     pub error: String,
 }
@@ -51,6 +56,8 @@ pub struct AugmentationStatus {
     pub status: &'static str,
     pub progress: f64,
     pub jobs: JobCounts,
+    /// Jobs of each kind (`synthesize`, `correct`, ...).
+    pub kinds: BTreeMap<String, i64>,
     pub errors: Vec<JobError>,
     pub created_at: DateTime<Utc>,
 }
@@ -68,7 +75,7 @@ pub struct CreateQuery {
 }
 
 /// The JSON recipe, checked with the same parser the CLI uses.
-fn check_recipe(body: &Bytes) -> Result<(Value, synth::Recipe), ApiError> {
+fn check_recipe(body: &Bytes) -> Result<(Value, pipeline::Recipe), ApiError> {
     let value: Value = serde_json::from_slice(body).map_err(|e| {
         ApiError::unprocessable(format!(
             "recipe: not valid JSON at line {}, column {}: {e}",
@@ -88,6 +95,129 @@ fn check_recipe(body: &Bytes) -> Result<(Value, synth::Recipe), ApiError> {
     Ok((value, recipe))
 }
 
+/// A stored clip as the graph needs it.
+type ClipRow = (Uuid, String, String, String, Option<String>);
+
+fn clip_ref((clip_id, clip_name, format, source_name, skeleton_name): &ClipRow) -> ClipRef {
+    ClipRef {
+        clip_id: *clip_id,
+        clip_name: clip_name.clone(),
+        source_name: source_name.clone(),
+        skeleton_name: skeleton_name.clone(),
+        format: if format == "amc" {
+            ClipFormat::Amc
+        } else {
+            ClipFormat::Bvh
+        },
+    }
+}
+
+/// One job to insert: key, kind, input, keys of the jobs it waits for.
+struct NewJob {
+    key: String,
+    kind: &'static str,
+    input: Value,
+    deps: Vec<String>,
+}
+
+/// The augmentation's jobs: `pipeline::plan`, with the plan's per-output
+/// `synthesize` jobs of one clip merged into one `synthesize:<clip>` job (they
+/// take milliseconds each; that job checkpoints after every output).
+fn graph(
+    recipe_value: &Value,
+    recipe: &pipeline::Recipe,
+    clips: &[ClipRow],
+    seed: u64,
+) -> Result<Vec<NewJob>, ApiError> {
+    let names: Vec<String> = clips.iter().map(|c| c.1.clone()).collect();
+    let plan = pipeline::plan(recipe, &names, seed);
+    let by_name: HashMap<&str, &ClipRow> = clips.iter().map(|c| (c.1.as_str(), c)).collect();
+    // Plan key -> stored job key.
+    let mut stored_key: HashMap<&str, String> = HashMap::new();
+    let mut jobs: Vec<NewJob> = Vec::new();
+    for planned in &plan.jobs {
+        if let JobKind::Synthesize { clip, .. } = &planned.kind {
+            let key = format!("{}:{clip}", kinds::SYNTHESIZE);
+            stored_key.insert(&planned.key, key.clone());
+            if jobs.iter().any(|j| j.key == key) {
+                continue;
+            }
+            let row = by_name
+                .get(clip.as_str())
+                .ok_or_else(|| ApiError::internal(format!("the plan names no clip `{clip}`")))?;
+            let r = clip_ref(row);
+            let input = SynthesizeInput {
+                clip_id: r.clip_id,
+                clip_name: r.clip_name,
+                source_name: r.source_name,
+                skeleton_name: r.skeleton_name,
+                format: r.format,
+                recipe: recipe_value.clone(),
+                seed,
+            };
+            jobs.push(NewJob {
+                key,
+                kind: kinds::SYNTHESIZE,
+                input: to_json(&input)?,
+                deps: Vec::new(),
+            });
+            continue;
+        }
+        let (kind, clip_name, reads): (&'static str, Option<&String>, Vec<&String>) =
+            match &planned.kind {
+                JobKind::Synthesize { .. } => unreachable!("handled above"),
+                JobKind::Vae { clips, .. } => (kinds::VAE, None, clips.iter().collect()),
+                JobKind::Interaction { a, b, .. } => (kinds::INTERACTION, Some(a), vec![a, b]),
+                JobKind::CorrectOriginal { clip, .. } => {
+                    (kinds::CORRECT_ORIGINAL, Some(clip), vec![clip])
+                }
+                JobKind::Correct { clip, .. } => (kinds::CORRECT, Some(clip), vec![]),
+                JobKind::DebiasTrain { originals } => {
+                    (kinds::DEBIAS_TRAIN, None, originals.iter().collect())
+                }
+                JobKind::DebiasApply { clip } => (kinds::DEBIAS_APPLY, Some(clip), vec![]),
+            };
+        let clips = reads
+            .into_iter()
+            .map(|n| {
+                by_name
+                    .get(n.as_str())
+                    .map(|row| clip_ref(row))
+                    .ok_or_else(|| ApiError::internal(format!("the plan names no clip `{n}`")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut deps = Vec::new();
+        for d in &planned.deps {
+            let k = stored_key
+                .get(d.as_str())
+                .cloned()
+                .ok_or_else(|| ApiError::internal(format!("{}: unknown input {d}", planned.key)))?;
+            if !deps.contains(&k) {
+                deps.push(k);
+            }
+        }
+        stored_key.insert(&planned.key, planned.key.clone());
+        let input = PipelineInput {
+            job: planned.clone(),
+            clip_name: clip_name.cloned(),
+            recipe: recipe_value.clone(),
+            seed,
+            clips,
+        };
+        jobs.push(NewJob {
+            key: planned.key.clone(),
+            kind,
+            input: to_json(&input)?,
+            deps,
+        });
+    }
+    Ok(jobs)
+}
+
+fn to_json<T: Serialize>(value: &T) -> Result<Value, ApiError> {
+    serde_json::to_value(value).map_err(|e| ApiError::internal(e.to_string()))
+}
+
 pub async fn create(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -96,15 +226,23 @@ pub async fn create(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     datasets::find(&state, &tenant, dataset_id).await?;
-    let (recipe, parsed) = check_recipe(&body)?;
-    let seed = parsed.effective_seed(query.seed);
-    let clips: Vec<(Uuid, String, String, String, Option<String>)> = sqlx::query_as(
+    let (recipe_value, recipe) = check_recipe(&body)?;
+    let seed = recipe.effective_seed(query.seed);
+    let clips: Vec<ClipRow> = sqlx::query_as(
         "SELECT id, name, format, source_name, skeleton_name FROM clips
          WHERE dataset_id = $1 ORDER BY position",
     )
     .bind(dataset_id)
     .fetch_all(&state.db)
     .await?;
+    let jobs = graph(&recipe_value, &recipe, &clips, seed)?;
+    if jobs.is_empty() {
+        return Err(ApiError::unprocessable(
+            "recipe: makes nothing from this dataset (no clip class has `[vae] min_clips` clips, \
+             or no `<stem>_A` / `<stem>_B` pair for `[interaction]`)",
+        )
+        .with_file("recipe"));
+    }
     let id = Uuid::new_v4();
     let mut tx = state.db.begin().await?;
     sqlx::query(
@@ -113,45 +251,50 @@ pub async fn create(
     .bind(id)
     .bind(tenant.id)
     .bind(dataset_id)
-    .bind(sqlx::types::Json(&recipe))
+    .bind(sqlx::types::Json(&recipe_value))
     .bind(seed as i64)
     .execute(&mut *tx)
     .await?;
-    for (clip_id, clip_name, format, source_name, skeleton_name) in clips {
-        let input = SynthesizeInput {
-            clip_id,
-            clip_name,
-            source_name,
-            skeleton_name,
-            format: if format == "amc" {
-                motionaug_protocol::ClipFormat::Amc
-            } else {
-                motionaug_protocol::ClipFormat::Bvh
-            },
-            recipe: recipe.clone(),
-            seed,
-        };
-        let input = serde_json::to_value(&input).map_err(|e| ApiError::internal(e.to_string()))?;
+    let mut ids: HashMap<String, Uuid> = HashMap::with_capacity(jobs.len());
+    let mut kinds_used: Vec<&'static str> = Vec::new();
+    for job in jobs {
+        let job_id = Uuid::new_v4();
         sqlx::query(
-            "INSERT INTO jobs (id, augmentation_id, kind, state, input, max_attempts)
-             VALUES ($1, $2, $3, 'queued', $4, $5)",
+            "INSERT INTO jobs (id, augmentation_id, key, kind, state, input, max_attempts)
+             VALUES ($1, $2, $3, $4, 'queued', $5, $6)",
         )
-        .bind(Uuid::new_v4())
+        .bind(job_id)
         .bind(id)
-        .bind(kinds::SYNTHESIZE)
-        .bind(sqlx::types::Json(input))
+        .bind(&job.key)
+        .bind(job.kind)
+        .bind(sqlx::types::Json(&job.input))
         .bind(state.config.queue.max_attempts)
         .execute(&mut *tx)
         .await?;
+        for dep in &job.deps {
+            let dep_id = ids.get(dep).ok_or_else(|| {
+                ApiError::internal(format!("{}: input {dep} comes later", job.key))
+            })?;
+            sqlx::query("INSERT INTO job_dependencies (job_id, depends_on) VALUES ($1, $2)")
+                .bind(job_id)
+                .bind(dep_id)
+                .execute(&mut *tx)
+                .await?;
+        }
+        ids.insert(job.key, job_id);
+        if !kinds_used.contains(&job.kind) {
+            kinds_used.push(job.kind);
+        }
     }
     tx.commit().await?;
-    tracing::info!(tenant = %tenant.name, augmentation = %id, dataset = %dataset_id, "augmentation queued");
-    state
-        .events
-        .publish(Event::Wake {
-            kind: kinds::SYNTHESIZE.into(),
-        })
-        .await;
+    tracing::info!(tenant = %tenant.name, augmentation = %id, dataset = %dataset_id,
+                   jobs = ids.len(), "augmentation queued");
+    for kind in kinds_used {
+        state
+            .events
+            .publish(Event::Wake { kind: kind.into() })
+            .await;
+    }
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, format!("/v1/augmentations/{id}"))],
@@ -214,8 +357,13 @@ pub async fn load_status(
     else {
         return Ok(None);
     };
-    let errors: Vec<(Uuid, Option<String>, String)> = sqlx::query_as(
-        "SELECT id, input->>'clip_name', error FROM jobs
+    let kinds: Vec<(String, i64)> =
+        sqlx::query_as("SELECT kind, count(*) FROM jobs WHERE augmentation_id = $1 GROUP BY kind")
+            .bind(id)
+            .fetch_all(&state.db)
+            .await?;
+    let errors: Vec<(Uuid, String, Option<String>, String)> = sqlx::query_as(
+        "SELECT id, key, input->>'clip_name', error FROM jobs
          WHERE augmentation_id = $1 AND state = 'failed' AND error IS NOT NULL ORDER BY seq",
     )
     .bind(id)
@@ -249,9 +397,15 @@ pub async fn load_status(
             failed,
             cancelled,
         },
+        kinds: kinds.into_iter().collect(),
         errors: errors
             .into_iter()
-            .map(|(job, clip, error)| JobError { job, clip, error })
+            .map(|(job, key, clip, error)| JobError {
+                job,
+                key,
+                clip,
+                error,
+            })
             .collect(),
         created_at,
     }))
@@ -382,7 +536,8 @@ async fn wait_for_change(
     let _ = tokio::time::timeout(poll, wait).await;
 }
 
-/// A zip of every output with `manifest.json` (the same manifest the CLI writes).
+/// A zip of every final output with `manifest.json` (the same manifest the CLI
+/// writes) and the correction reports the manifest names.
 pub async fn results(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -397,18 +552,21 @@ pub async fn results(
             status.status
         )));
     }
-    let outputs: Vec<(sqlx::types::Json<Value>,)> = sqlx::query_as(
-        "SELECT j.output FROM jobs j JOIN clips c ON c.id = (j.input->>'clip_id')::uuid
-         WHERE j.augmentation_id = $1 ORDER BY c.position, j.seq",
-    )
-    .bind(id)
-    .fetch_all(&state.db)
-    .await?;
+    let outputs: Vec<(String, Option<sqlx::types::Json<Value>>)> =
+        sqlx::query_as("SELECT key, output FROM jobs WHERE augmentation_id = $1 ORDER BY seq")
+            .bind(id)
+            .fetch_all(&state.db)
+            .await?;
     let mut entries = Vec::new();
     let mut files = Vec::new();
-    for (output,) in outputs {
-        let output: SynthesizeOutput = serde_json::from_value(output.0)
-            .map_err(|e| ApiError::internal(format!("stored job output is unreadable: {e}")))?;
+    for (key, output) in outputs {
+        let output: JobOutput = output
+            .map(|o| serde_json::from_value(o.0))
+            .transpose()
+            .map_err(|e| {
+                ApiError::internal(format!("{key}: stored job output is unreadable: {e}"))
+            })?
+            .unwrap_or_default();
         entries.extend(output.manifest);
         files.extend(output.files);
     }

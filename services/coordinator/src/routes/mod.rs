@@ -58,6 +58,10 @@ pub fn router(state: AppState) -> Router<AppState> {
             "/internal/v1/jobs/{id}/artifacts/{*name}",
             put(worker::put_artifact).layer(DefaultBodyLimit::max(limits.max_artifact_bytes)),
         )
+        .route(
+            "/internal/v1/jobs/{id}/inputs/{*name}",
+            get(worker::get_input),
+        )
         .route("/internal/v1/clips/{id}/source", get(worker::clip_source))
         .route(
             "/internal/v1/clips/{id}/skeleton",

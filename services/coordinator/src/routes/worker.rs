@@ -13,8 +13,8 @@ use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use motionaug_protocol::{
-    ClaimRequest, ClaimedJob, CompleteRequest, FailRequest, HeartbeatReply, HeartbeatRequest,
-    ReleaseRequest, SynthesizeOutput,
+    ClaimRequest, ClaimedJob, CompleteRequest, DepOutput, FailRequest, HeartbeatReply,
+    HeartbeatRequest, JobOutput, ReleaseRequest,
 };
 use serde::Deserialize;
 use tokio::sync::broadcast::error::RecvError;
@@ -97,6 +97,11 @@ pub async fn claim(
                     id: row.augmentation_id,
                 })
                 .await;
+            let deps = queue::dep_outputs(&state.db, row.id)
+                .await?
+                .into_iter()
+                .map(|(key, kind, output)| DepOutput { key, kind, output })
+                .collect();
             let lease_ms = queue_config.lease.as_millis() as u64;
             let job = ClaimedJob {
                 id: row.id,
@@ -107,6 +112,7 @@ pub async fn claim(
                 lease_ms,
                 heartbeat_ms: (lease_ms / 4).max(50),
                 has_checkpoint: row.has_checkpoint,
+                deps,
             };
             return Ok(Json(job).into_response());
         }
@@ -266,7 +272,7 @@ pub async fn complete(
     }
 }
 
-/// Checks the output's structure for the job's kind; returns the files it lists.
+/// Checks the output's structure; returns every file it names.
 async fn check_output(
     state: &AppState,
     id: Uuid,
@@ -276,19 +282,36 @@ async fn check_output(
         .bind(id)
         .fetch_optional(&state.db)
         .await?;
-    match kind.as_deref() {
-        Some(motionaug_protocol::kinds::SYNTHESIZE) => {
-            let output: SynthesizeOutput = serde_json::from_value(output.clone())
-                .map_err(|e| ApiError::unprocessable(format!("synthesize output: {e}")))?;
-            for (i, entry) in output.manifest.iter().enumerate() {
-                serde_json::from_value::<synth::ManifestEntry>(entry.clone()).map_err(|e| {
-                    ApiError::unprocessable(format!("synthesize output: manifest[{i}]: {e}"))
-                })?;
-            }
-            Ok(output.files)
-        }
-        _ => Ok(Vec::new()),
+    let Some(kind) = kind else {
+        return Ok(Vec::new());
+    };
+    let output: JobOutput = serde_json::from_value(output.clone())
+        .map_err(|e| ApiError::unprocessable(format!("{kind} output: {e}")))?;
+    let entries = output
+        .manifest
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (format!("manifest[{i}]"), e))
+        .chain(
+            output
+                .clips
+                .iter()
+                .map(|c| (format!("clips[{}]", c.name), &c.entry)),
+        );
+    for (at, entry) in entries {
+        serde_json::from_value::<pipeline::ManifestEntry>(entry.clone())
+            .map_err(|e| ApiError::unprocessable(format!("{kind} output: {at}: {e}")))?;
     }
+    let files = output.all_files();
+    for (i, name) in files.iter().enumerate() {
+        valid_artifact_name(name)?;
+        if files[..i].contains(name) {
+            return Err(ApiError::unprocessable(format!(
+                "{kind} output: `{name}` is listed twice"
+            )));
+        }
+    }
+    Ok(files)
 }
 
 pub async fn fail(
@@ -343,6 +366,22 @@ pub async fn release(
         .await;
     state.events.publish(Event::Wake { kind }).await;
     Ok(StatusCode::NO_CONTENT)
+}
+
+/// An artifact stored by one of the jobs this job depends on (a clip to correct,
+/// a correction's checkpoints, the debiasing model), for the current lease.
+pub async fn get_input(
+    State(state): State<AppState>,
+    _: Worker,
+    Path((id, name)): Path<(Uuid, String)>,
+    Query(q): Query<EpochQuery>,
+) -> Result<Response, ApiError> {
+    let (lease, content) = queue::get_input(&state.db, id, q.epoch, &name).await?;
+    accept(&state, lease)?;
+    match content {
+        Some(bytes) => Ok(bytes.into_response()),
+        None => Err(ApiError::not_found("input")),
+    }
 }
 
 pub async fn clip_source(
