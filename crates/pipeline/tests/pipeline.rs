@@ -82,6 +82,23 @@ fn recipes_are_validated_with_the_table_and_field_named() {
 }
 
 #[test]
+fn example_recipes_parse() {
+    let dir = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../examples/recipes"
+    ));
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).expect("examples/recipes") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            Recipe::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "{n} recipes");
+}
+
+#[test]
 fn the_plan_orders_jobs_after_their_inputs() {
     let recipe = Recipe::from_toml_str(
         r#"

@@ -118,21 +118,6 @@ fn expansion_is_seeded_per_output_and_order_independent() {
     assert!(line.get("effector").is_none());
 }
 
-#[test]
-fn example_recipes_parse() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/recipes");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            let text = std::fs::read_to_string(&path).unwrap();
-            Recipe::from_toml_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            n += 1;
-        }
-    }
-    assert!(n >= 1);
-}
-
 mod properties {
     use proptest::prelude::*;
     use synth::*;
