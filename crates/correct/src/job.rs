@@ -8,6 +8,8 @@
 //! iteration / sample limits. The curve is reported either way.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use motion::Motion;
@@ -43,6 +45,10 @@ pub struct CorrectConfig {
     /// source clip's correction for a synthesised variant of it. Ignored when
     /// resuming this job's own checkpoint.
     pub warm_start: Option<PathBuf>,
+    /// Set from another thread to stop training (cancellation, shutdown): the
+    /// job saves a checkpoint and returns [`CorrectError::Stopped`] at the end of
+    /// the current PPO iteration.
+    pub stop: Option<Arc<AtomicBool>>,
 }
 
 impl Default for CorrectConfig {
@@ -75,6 +81,7 @@ impl Default for CorrectConfig {
             checkpoint_every_s: 120.0,
             seed: 0,
             warm_start: None,
+            stop: None,
         }
     }
 }
@@ -187,6 +194,15 @@ pub fn correct(
     };
     let mut eval_error = None;
     let mut reached_target = false;
+    let stop_requested = || {
+        config
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+    };
+    if stop_requested() {
+        return Err(CorrectError::Stopped);
+    }
     let started = Instant::now();
     let reason = trainer.run(&limits, |trainer, it| {
         let mut r_norm = None;
@@ -211,7 +227,7 @@ pub fn correct(
             mean_reward: it.mean_reward,
             r_norm,
         });
-        if eval_error.is_some() || reached_target {
+        if eval_error.is_some() || reached_target || stop_requested() {
             Control::Stop
         } else {
             Control::Continue
@@ -219,6 +235,10 @@ pub fn correct(
     })?;
     if let Some(err) = eval_error {
         return Err(err);
+    }
+    if stop_requested() && !reached_target {
+        tracing::info!("stopped on request; checkpoint saved");
+        return Err(CorrectError::Stopped);
     }
     tracing::info!(
         ?reason,

@@ -71,4 +71,6 @@ pub enum CorrectError {
     },
     #[error("invalid correction settings: {0}")]
     Config(String),
+    #[error("stopped on request before the end of training (a checkpoint was saved)")]
+    Stopped,
 }

@@ -104,3 +104,33 @@ fn bad_settings_are_rejected_before_any_work() {
     assert!(correct(&kick(), "kick", &config, dir.path(), false, |_| {}).is_err());
     assert!(!dir.path().join("checkpoints").exists());
 }
+
+#[test]
+fn a_stop_request_ends_training_with_a_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut config = tiny(1000);
+    config.stop = Some(stop.clone());
+    let mut iterations = 0;
+    let result = correct(&kick(), "kick", &config, dir.path(), false, |_| {
+        iterations += 1;
+        if iterations == 2 {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    });
+    assert!(
+        matches!(result, Err(correct::CorrectError::Stopped)),
+        "{:?}",
+        result.err()
+    );
+    assert_eq!(iterations, 2, "training went on after the stop request");
+    assert!(
+        ppo::latest_checkpoint(&dir.path().join("checkpoints"))
+            .unwrap()
+            .is_some()
+    );
+    assert!(
+        !dir.path().join("report.json").exists(),
+        "a stopped job reports nothing"
+    );
+}

@@ -475,6 +475,8 @@ impl Job<'_> {
         };
         let mut config = step.config(seed);
         config.checkpoint_every_s = self.ctx.checkpoint_every.as_secs_f64();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        config.stop = Some(stop.clone());
         let control = self.ctx.control.clone();
         let name = name.to_string();
         let dir = run_dir.clone();
@@ -497,15 +499,24 @@ impl Job<'_> {
         loop {
             tokio::select! {
                 done = &mut task => {
-                    return done
+                    return match done
                         .map_err(|e| Halt::Failed(JobFailure::transient(format!("correction crashed: {e}"))))?
-                        .map_err(pipeline_failure);
+                    {
+                        // Stopped on our request (cancelled, lease lost, shutdown).
+                        Err(PipelineError::Correct(correct::CorrectError::Stopped)) => Err(Halt::Stopped),
+                        other => other.map_err(pipeline_failure),
+                    };
                 }
                 _ = tick.tick() => {}
             }
+            if self.ctx.control.stop_reason().is_some() {
+                // Cancelled, lease lost or shutting down: end the training at the
+                // end of its current iteration (it saves a checkpoint first).
+                stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
             if self.ctx.control.stop_reason() == Some(Stop::Shutdown) {
-                // The training thread cannot be interrupted; the process is exiting and
-                // the next worker resumes from the last uploaded checkpoint.
+                // The process is exiting; the next worker resumes from the last
+                // uploaded checkpoint.
                 return Err(Halt::Stopped);
             }
             let latest = ppo::latest_checkpoint(&checkpoints).ok().flatten();
