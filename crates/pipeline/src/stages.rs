@@ -211,65 +211,16 @@ pub fn correct_with_config(
         .map_err(correct::CorrectError::from)?
         .is_some();
     let outcome = correct::correct(motion, name, &config, dir, resume, on_progress)?;
-    write_exact(&dir.join(EXACT), &outcome.motion)?;
+    motion::io::write_atomic(
+        &dir.join(EXACT),
+        &crate::codec::encode_clip(&outcome.motion, None)?,
+    )?;
     Ok(outcome)
 }
 
-/// The corrected clip in full f64 precision (the BVH and NPZ outputs round),
-/// so a reused correction gives bit-identical results downstream.
+/// The corrected clip in full f64 precision ([`crate::codec`]; the BVH and NPZ
+/// outputs round), so a reused correction gives bit-identical results downstream.
 const EXACT: &str = "corrected.exact.npz";
-
-fn write_exact(path: &Path, m: &Motion) -> Result<(), PipelineError> {
-    let io = |source| PipelineError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let root: Vec<f64> = m
-        .root_translation()
-        .iter()
-        .flat_map(|p| [p.x, p.y, p.z])
-        .collect();
-    let rot: Vec<f64> = m
-        .rotations()
-        .iter()
-        .flat_map(|q| [q.w, q.x, q.y, q.z])
-        .collect();
-    let bytes = motion::npz::NpzWriter::new(std::io::Cursor::new(Vec::new()))
-        .array_f64("root_translation", &[m.frames(), 3], &root)
-        .and_then(|w| w.array_f64("rotations", &[m.frames(), m.joints(), 4], &rot))
-        .and_then(|w| w.scalar_f64("fps", m.fps()))
-        .and_then(|w| w.finish())
-        .map_err(io)?
-        .into_inner();
-    Ok(motion::io::write_atomic(path, &bytes)?)
-}
-
-fn read_exact(path: &Path, source: &Motion) -> Result<Motion, PipelineError> {
-    let bad = |what: &str| PipelineError::Job(format!("{}: {what}", path.display()));
-    let bytes = std::fs::read(path).map_err(|e| PipelineError::Io {
-        path: path.to_path_buf(),
-        source: e,
-    })?;
-    let arrays = motion::npz::read(&bytes).map_err(|e| bad(&e.to_string()))?;
-    let get = |name: &str| {
-        arrays
-            .iter()
-            .find(|a| a.name == name)
-            .and_then(|a| a.to_f64())
-            .ok_or_else(|| bad(&format!("no float64 array `{name}`")))
-    };
-    let (root, rot, fps) = (get("root_translation")?, get("rotations")?, get("fps")?);
-    let root = root
-        .chunks_exact(3)
-        .map(|p| motion::glam::DVec3::new(p[0], p[1], p[2]))
-        .collect();
-    let rot = rot
-        .chunks_exact(4)
-        .map(|q| motion::glam::DQuat::from_xyzw(q[1], q[2], q[3], q[0]))
-        .collect();
-    let fps = *fps.first().ok_or_else(|| bad("empty fps"))?;
-    Ok(source.with_frames(fps, root, rot)?)
-}
 
 /// The outcome of a correction that already finished in `dir`, if there is one.
 pub fn finished_correction(
@@ -288,8 +239,21 @@ pub fn finished_correction(
             }
         })?)
         .map_err(|e| PipelineError::Job(format!("{}: {e}", report_path.display())))?;
+    let bytes = std::fs::read(&exact).map_err(|source| PipelineError::Io {
+        path: exact.clone(),
+        source,
+    })?;
+    let (corrected, _) = crate::codec::decode_clip(&bytes)?;
+    if corrected.joints() != motion.joints() {
+        return Err(PipelineError::Job(format!(
+            "{}: a clip of {} joints, not {}",
+            exact.display(),
+            corrected.joints(),
+            motion.joints()
+        )));
+    }
     Ok(Some(correct::Outcome {
-        motion: read_exact(&exact, motion)?,
+        motion: corrected,
         report,
     }))
 }
