@@ -1,39 +1,10 @@
 //! The `motionaug` binary end to end, on the bundled example clips.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::*;
+use std::path::Path;
 
 use motion::io::{LoadOptions, load};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn example(name: &str) -> PathBuf {
-    root().join("examples/data").join(name)
-}
-
-fn motionaug(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_motionaug"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the motionaug binary runs")
-}
-
-fn ok(output: Output) -> String {
-    assert!(
-        output.status.success(),
-        "motionaug failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).expect("stdout is UTF-8")
-}
-
-fn failed(output: Output) -> String {
-    assert!(!output.status.success(), "motionaug should have failed");
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
 
 const KICK: &str = "examples/data/HDM_bd_kickLFront1Reps_001_120.amc";
 const JOG: &str = "examples/data/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc";

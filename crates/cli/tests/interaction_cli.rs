@@ -3,31 +3,11 @@
 //! with a note when absent), with a tiny model: this checks the plumbing and
 //! the files, not the model's quality (the crate's tests and README do).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::*;
+use std::path::Path;
 
 use motion::{LoadOptions, load};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn motionaug(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_motionaug"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the motionaug binary runs")
-}
-
-fn ok(output: Output) -> String {
-    assert!(
-        output.status.success(),
-        "motionaug failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).expect("stdout is UTF-8")
-}
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()

@@ -2,28 +2,8 @@
 //! `vae sample` and `debias train` / `debias apply` (a few iterations: this
 //! checks the plumbing, not the model quality, which the crates' tests check).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn motionaug(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_motionaug"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the motionaug binary runs")
-}
-
-fn ok(output: Output) {
-    assert!(
-        output.status.success(),
-        "motionaug failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-}
+mod common;
+use common::*;
 
 #[test]
 fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
