@@ -87,7 +87,8 @@ struct State<'a> {
     sources: HashMap<String, &'a Clip>,
     /// Clips between stages.
     pending: HashMap<String, NewClip>,
-    corrections: HashMap<String, correct::Report>,
+    /// Correction summaries of corrected outputs awaiting debiasing.
+    corrections: HashMap<String, CorrectionSummary>,
     corrected_originals: HashMap<String, Motion>,
     debiaser: Option<debias::Debiaser>,
     failed: HashSet<String>,
@@ -308,15 +309,17 @@ impl<'a> State<'a> {
                         .ok()
                         .map(|p| p.display().to_string())
                 });
+                let summary = CorrectionSummary::new(&outcome.report, report_path);
                 let mut entry = ManifestEntry {
                     synth: made.entry,
-                    correction: Some(CorrectionSummary::new(&outcome.report, report_path)),
+                    correction: Some(summary.clone()),
                     debiased: false,
                 };
                 entry.synth.frames = outcome.motion.frames();
                 entry.synth.fps = outcome.motion.fps();
                 let accepted = outcome.report.accepted;
-                self.corrections.insert(clip.clone(), outcome.report);
+                // Debiasing keeps the correction's summary in the clip's manifest entry.
+                self.corrections.insert(clip.clone(), summary);
                 if !accepted && !step.keep_rejected {
                     self.summary.rejected.push(clip.clone());
                     self.failed.insert(job.key.clone());
@@ -354,20 +357,8 @@ impl<'a> State<'a> {
                     .as_ref()
                     .ok_or_else(|| PipelineError::Job("no debiasing model".into()))?;
                 let motion = stages::debias_apply(model, &made.motion)?;
-                let report = self.corrections.get(clip);
                 let entry = ManifestEntry {
-                    correction: report.map(|r| {
-                        CorrectionSummary::new(
-                            r,
-                            self.options.out.and_then(|out| {
-                                self.correct_dir(clip)
-                                    .join("report.json")
-                                    .strip_prefix(out)
-                                    .ok()
-                                    .map(|p| p.display().to_string())
-                            }),
-                        )
-                    }),
+                    correction: self.corrections.remove(clip),
                     debiased: true,
                     synth: made.entry.clone(),
                 };
