@@ -363,3 +363,94 @@ fn eval_predict_tiny_run_reports_both_conditions_per_horizon() {
     assert!(v["no_aug"]["400"].as_f64().unwrap() > 0.0);
     assert!(v.get("aug").is_none(), "{v}");
 }
+
+#[test]
+fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
+    if !root().join(HDM05).is_dir() {
+        eprintln!("note: {HDM05} is absent; skipping the eval table test");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("table");
+    let args = [
+        "eval",
+        "table",
+        "--data",
+        HDM05,
+        "--classes",
+        "sneak",
+        "--test-actors",
+        "bk",
+        "--models",
+        "gcn",
+        "--sets",
+        "vae,physics",
+        "--vae-iterations",
+        "2",
+        "--correct-count",
+        "2",
+        "--correct-originals",
+        "2",
+        "--correct-samples",
+        "1",
+        "--debias-iterations",
+        "20",
+        "--iterations",
+        "2",
+        "--max-windows",
+        "8",
+        "--gcn-hidden",
+        "8",
+        "--gcn-stages",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    ok(motionaug(&args));
+    let read = || -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(out.join("table.json")).unwrap()).unwrap()
+    };
+    let first = read();
+    let cell = &first["cells"][0];
+    let physics = &cell["physics"];
+    assert_eq!(physics["originals"], 2, "{physics}");
+    assert_eq!(physics["samples"], 2, "{physics}");
+    // One PPO iteration (4096 samples) at most per clip.
+    assert!(
+        physics["ppo_samples"].as_u64().unwrap() <= 4 * 4096,
+        "{physics}"
+    );
+    assert_eq!(cell["synth_clips"]["vae_sub"], 2);
+    let accepted = physics["samples_accepted"].as_u64().unwrap();
+    assert_eq!(cell["synth_clips"]["vae_corrected"], accepted);
+    assert_eq!(cell["synth_clips"]["vae_debiased"], accepted);
+    for set in ["vae_near", "vae_sub"] {
+        let p = &cell["synth"][set]["plausibility"];
+        assert!(p["foot_skating_m_s"].as_f64().unwrap() >= 0.0, "{set}: {p}");
+        assert!(
+            cell["predict"]["gcn"][set]["errors"]["400"]
+                .as_f64()
+                .unwrap()
+                > 0.0
+        );
+    }
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(
+        md.contains("| vae_sub |") && md.contains("## Correction"),
+        "{md}"
+    );
+    // Corrections are kept in OUT/work: a rerun reuses them and gives the same sets.
+    assert!(out.join("work/bk_sneak/samples").is_dir());
+    ok(motionaug(&args));
+    let second = read();
+    assert_eq!(second["cells"][0]["synth"], first["cells"][0]["synth"]);
+    assert_eq!(
+        second["cells"][0]["physics"]["ppo_samples"],
+        physics["ppo_samples"]
+    );
+    // The physics set needs the VAE's samples.
+    let mut no_vae = args.to_vec();
+    no_vae[11] = "physics";
+    let err = failed(motionaug(&no_vae));
+    assert!(err.contains("add vae to --sets"), "{err}");
+}

@@ -33,6 +33,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
+use super::eval_physics::{self, PhysicsArgs, PhysicsSummary};
 use crate::output::{print_stdout, write_atomic, write_json};
 
 #[derive(clap::Args)]
@@ -327,6 +328,30 @@ fn sample_vae(
 struct SynthScores {
     min_dtw: MinDtw,
     mmd: Mmd,
+    plausibility: SetPlausibility,
+}
+
+/// Physical plausibility of a set: means over its clips of
+/// `motion::metrics::plausibility` (default thresholds, clips at 30 fps).
+#[derive(Debug, Clone, Serialize)]
+struct SetPlausibility {
+    foot_skating_m_s: f64,
+    penetration_mean_m: f64,
+    floating_fraction: f64,
+}
+
+impl SetPlausibility {
+    fn of(clips: &[Motion]) -> SetPlausibility {
+        let all: Vec<_> = clips.iter().map(motion::metrics::plausibility).collect();
+        let mean = |f: fn(&motion::metrics::Plausibility) -> f64| {
+            all.iter().map(f).sum::<f64>() / all.len().max(1) as f64
+        };
+        SetPlausibility {
+            foot_skating_m_s: mean(|p| p.foot_skating_m_s),
+            penetration_mean_m: mean(|p| p.penetration_mean_m),
+            floating_fraction: mean(|p| p.floating_fraction),
+        }
+    }
 }
 
 fn synth_scores(
@@ -352,7 +377,11 @@ fn synth_scores(
         ms.iter().map(|m| Ok(mmd::clip_feature(m)?)).collect()
     };
     let mmd = mmd::mmd(&feats(&s)?, &feats(&t)?);
-    Ok(SynthScores { min_dtw, mmd })
+    Ok(SynthScores {
+        min_dtw,
+        mmd,
+        plausibility: SetPlausibility::of(&s),
+    })
 }
 
 #[derive(clap::Args)]
@@ -591,7 +620,37 @@ struct TableArgs {
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
+    /// Synthesised sets: noise, ik, vae (near and prior samples), physics (a
+    /// subset of the VAE's near samples as sampled, physically corrected, and
+    /// debiased; needs vae).
+    #[arg(long, value_delimiter = ',', default_value = "noise,ik,vae")]
+    sets: Vec<SetKind>,
+    #[command(flatten)]
+    physics: PhysicsArgs,
+    /// Folder for the corrections (default: OUT/work); a rerun reuses
+    /// finished corrections and resumes interrupted ones.
+    #[arg(long)]
+    work: Option<PathBuf>,
 }
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+enum SetKind {
+    Noise,
+    Ik,
+    Vae,
+    Physics,
+}
+
+/// Conditions of the prediction tables, in order (sets not made are skipped).
+const PREDICT_CONDITIONS: [&str; 6] = [
+    "noise",
+    "ik",
+    "vae_near",
+    "vae_sub",
+    "vae_corrected",
+    "vae_debiased",
+];
 
 #[derive(Serialize, Default)]
 struct TableCell {
@@ -607,6 +666,9 @@ struct TableCell {
     predict: BTreeMap<String, BTreeMap<String, ConditionResult>>,
     zero_velocity: Option<Horizons>,
     vae_seconds: BTreeMap<String, f64>,
+    /// What the physical correction did (with `--sets ...,physics`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    physics: Option<PhysicsSummary>,
 }
 
 fn run_table(args: TableArgs) -> anyhow::Result<()> {
@@ -630,23 +692,29 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                 ..Default::default()
             };
             // Synthesised sets.
-            let noise = pipeline::Recipe::from_toml_str(&format!(
-                "seed = 1\n[[ops]]\nop = \"noise\"\ncopies = 10\nsigma_deg = {}\n",
-                args.noise_sigma_deg
-            ))?;
-            let ik = pipeline::Recipe::from_toml_str(&format!(
-                "seed = 1\n[[ops]]\nop = \"ik\"\npreset = \"{}\"\ncopies = 10\n",
-                class.to_ascii_lowercase()
-            ))
-            .with_context(|| format!("no IK preset for class `{class}`"))?;
-            let mut sets: Vec<(String, Vec<(String, Motion)>)> = vec![
-                ("noise".into(), apply_recipe(&noise, 1, None, &split.train)?),
-                ("ik".into(), apply_recipe(&ik, 1, None, &split.train)?),
-            ];
+            let mut sets: Vec<(String, Vec<(String, Motion)>)> = Vec::new();
+            if args.sets.contains(&SetKind::Noise) {
+                let noise = pipeline::Recipe::from_toml_str(&format!(
+                    "seed = 1\n[[ops]]\nop = \"noise\"\ncopies = 10\nsigma_deg = {}\n",
+                    args.noise_sigma_deg
+                ))?;
+                sets.push(("noise".into(), apply_recipe(&noise, 1, None, &split.train)?));
+            }
+            if args.sets.contains(&SetKind::Ik) {
+                let ik = pipeline::Recipe::from_toml_str(&format!(
+                    "seed = 1\n[[ops]]\nop = \"ik\"\npreset = \"{}\"\ncopies = 10\n",
+                    class.to_ascii_lowercase()
+                ))
+                .with_context(|| format!("no IK preset for class `{class}`"))?;
+                sets.push(("ik".into(), apply_recipe(&ik, 1, None, &split.train)?));
+            }
             let count = split.train.len() * 10;
-            let mut vae_runs = vec![("vae", None)];
-            if args.vae_ablation {
-                vae_runs.push(("vae_noadv", Some(0.0)));
+            let mut vae_runs = vec![];
+            if args.sets.contains(&SetKind::Vae) {
+                vae_runs.push(("vae", None));
+                if args.vae_ablation {
+                    vae_runs.push(("vae_noadv", Some(0.0)));
+                }
             }
             for (tag, weight) in vae_runs {
                 let t = Instant::now();
@@ -662,13 +730,32 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                     sample_vae(&model, count, Prior::Normal, 0)?,
                 ));
             }
+            if args.sets.contains(&SetKind::Physics) {
+                let near = sets
+                    .iter()
+                    .find(|(n, _)| n == "vae_near")
+                    .map(|(_, c)| c.as_slice())
+                    .context("--sets physics corrects the VAE's samples: add vae to --sets")?;
+                let work = args
+                    .work
+                    .clone()
+                    .unwrap_or_else(|| args.out.join("work"))
+                    .join(format!("{actor}_{class}"));
+                let p = eval_physics::correct_and_debias(&args.physics, &split.train, near, &work)?;
+                sets.push(("vae_sub".into(), p.subset));
+                sets.push(("vae_corrected".into(), p.corrected));
+                sets.push(("vae_debiased".into(), p.debiased));
+                cell.physics = Some(p.summary);
+            }
             let t = Instant::now();
             cell.synth
                 .insert("original".into(), synth_scores(&split.train, &split.test)?);
             for (name, clips) in &sets {
-                cell.synth
-                    .insert(name.clone(), synth_scores(clips, &split.test)?);
                 cell.synth_clips.insert(name.clone(), clips.len());
+                if !clips.is_empty() {
+                    cell.synth
+                        .insert(name.clone(), synth_scores(clips, &split.test)?);
+                }
             }
             eprintln!("synthesis metrics in {:.1} s", t.elapsed().as_secs_f64());
             if !args.no_predict {
@@ -684,7 +771,7 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                         protocol::evaluate(&split.train, &test, &config, &mut log)?,
                     );
                     for (name, clips) in &sets {
-                        if !matches!(name.as_str(), "noise" | "ik" | "vae_near") {
+                        if !PREDICT_CONDITIONS.contains(&name.as_str()) || clips.is_empty() {
                             continue;
                         }
                         eprintln!("{model}: {name}");
@@ -728,6 +815,8 @@ fn write_table(args: &TableArgs, cells: &[TableCell], seconds: f64) -> anyhow::R
         "noise_sigma_deg": args.noise_sigma_deg,
         "vae_iterations": args.vae_iterations,
         "vae_ablation": args.vae_ablation,
+        "sets": args.sets,
+        "physics": args.sets.contains(&SetKind::Physics).then_some(&args.physics),
     });
     write_json(
         &args.out.join("table.json"),
@@ -763,7 +852,15 @@ fn write_table(args: &TableArgs, cells: &[TableCell], seconds: f64) -> anyhow::R
                 rule.push_str("---|");
             }
             let _ = writeln!(md, "{header}\n{rule}");
-            for cond in ["zero_velocity", "no_aug", "noise", "ik", "vae_near"] {
+            let made = |cond: &str| {
+                row_cells
+                    .iter()
+                    .any(|c| c.predict.get(&m).is_some_and(|p| p.contains_key(cond)))
+            };
+            let conditions = ["zero_velocity", "no_aug"]
+                .into_iter()
+                .chain(PREDICT_CONDITIONS.into_iter().filter(|c| made(c)));
+            for cond in conditions {
                 let mut line = format!("| {cond} |");
                 for c in &row_cells {
                     let h = if cond == "zero_velocity" {
@@ -789,39 +886,93 @@ fn write_table(args: &TableArgs, cells: &[TableCell], seconds: f64) -> anyhow::R
             }
             md.push('\n');
         }
-        let _ = writeln!(
-            md,
-            "## Synthesis, test actor {actor}: min DTW (synth->test; test->synth) / MMD^2\n"
+        set_table(
+            &mut md,
+            &format!("Synthesis, test actor {actor}: min DTW (synth->test; test->synth) / MMD^2"),
+            &row_cells,
+            |s| {
+                format!(
+                    "{:.3}; {:.3} / {:.4}",
+                    s.min_dtw.synth_to_test, s.min_dtw.test_to_synth, s.mmd.mmd2
+                )
+            },
         );
-        let mut header = String::from("| set |");
-        let mut rule = String::from("|---|");
-        for c in &row_cells {
-            let _ = write!(header, " {} |", c.class);
-            rule.push_str("---|");
-        }
-        let _ = writeln!(md, "{header}\n{rule}");
-        let mut names: Vec<&String> = row_cells.iter().flat_map(|c| c.synth.keys()).collect();
-        names.sort();
-        names.dedup();
-        for name in names {
-            let mut line = format!("| {name} |");
+        set_table(
+            &mut md,
+            &format!(
+                "Plausibility, test actor {actor}: foot skating m/s / mean penetration mm / floating %"
+            ),
+            &row_cells,
+            |s| {
+                let p = &s.plausibility;
+                format!(
+                    "{:.3} / {:.1} / {:.0}",
+                    p.foot_skating_m_s,
+                    1000.0 * p.penetration_mean_m,
+                    100.0 * p.floating_fraction
+                )
+            },
+        );
+        if row_cells.iter().any(|c| c.physics.is_some()) {
+            let _ = writeln!(
+                md,
+                "## Correction, test actor {actor}\n\n| class | originals accepted | samples accepted | R_norm action 0 -> corrected | residual force ratio | PPO samples | seconds |\n|---|---|---|---|---|---|---|"
+            );
             for c in &row_cells {
-                match c.synth.get(name) {
-                    Some(s) => {
-                        let _ = write!(
-                            line,
-                            " {:.3}; {:.3} / {:.4} |",
-                            s.min_dtw.synth_to_test, s.min_dtw.test_to_synth, s.mmd.mmd2
-                        );
-                    }
-                    None => line.push_str(" - |"),
+                if let Some(p) = &c.physics {
+                    let _ = writeln!(
+                        md,
+                        "| {} | {}/{} | {}/{} | {:.3} -> {:.3} | {:.3} | {} | {:.0} |",
+                        c.class,
+                        p.originals_accepted,
+                        p.originals,
+                        p.samples_accepted,
+                        p.samples,
+                        p.mean_r_norm_action0,
+                        p.mean_r_norm,
+                        p.mean_residual_force_ratio,
+                        p.ppo_samples,
+                        p.seconds
+                    );
                 }
             }
-            let _ = writeln!(md, "{line}");
+            md.push('\n');
         }
-        md.push('\n');
     }
     write_atomic(&args.out.join("table.md"), md.as_bytes())
+}
+
+/// One Markdown table: a row per synthesised set, a column per class.
+fn set_table(
+    md: &mut String,
+    title: &str,
+    cells: &[&TableCell],
+    show: impl Fn(&SynthScores) -> String,
+) {
+    let _ = writeln!(md, "## {title}\n");
+    let mut header = String::from("| set |");
+    let mut rule = String::from("|---|");
+    for c in cells {
+        let _ = write!(header, " {} |", c.class);
+        rule.push_str("---|");
+    }
+    let _ = writeln!(md, "{header}\n{rule}");
+    let mut names: Vec<&String> = cells.iter().flat_map(|c| c.synth.keys()).collect();
+    names.sort();
+    names.dedup();
+    for name in names {
+        let mut line = format!("| {name} |");
+        for c in cells {
+            match c.synth.get(name) {
+                Some(s) => {
+                    let _ = write!(line, " {} |", show(s));
+                }
+                None => line.push_str(" - |"),
+            }
+        }
+        let _ = writeln!(md, "{line}");
+    }
+    md.push('\n');
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
