@@ -24,9 +24,10 @@
 //! * **Recording**: every control frame of the *simulated* character is kept and
 //!   [`ImitationEnv::recorded_motion`] writes it back onto the file's skeleton:
 //!   driver joints get the simulated body rotations, merged joints the
-//!   reference's local rotation, the root the simulated pelvis, in the file's
-//!   coordinates (the simulated floor is the clip's median-frame foot level,
-//!   see [`crate::reference::Reference`]).
+//!   reference's local rotation, the root the simulated pelvis, with the
+//!   simulated floor at y = 0 (or, with [`OutputFrame::Clip`], back in the
+//!   file's coordinates, where the simulated floor is the clip's median-frame
+//!   foot level, see [`crate::reference::Reference`]).
 
 use std::sync::Arc;
 
@@ -81,6 +82,21 @@ pub struct Config {
     /// Recompute the PD-residual force at every physics step instead of once
     /// per control step (the reference computes it once per policy step).
     pub residual_every_substep: bool,
+    /// Where [`ImitationEnv::recorded_motion`] puts the simulated floor.
+    pub output_frame: OutputFrame,
+}
+
+/// The vertical frame of the recorded motion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OutputFrame {
+    /// The simulated floor is y = 0: a clip that sank into the ground or
+    /// hovered over it (a VAE sample, an edit) comes out standing on y = 0,
+    /// which is where the plausibility metrics put the ground.
+    #[default]
+    Ground,
+    /// Back into the clip's own coordinates (the simulated floor at the
+    /// clip's median-frame foot level), for data whose floor is not y = 0.
+    Clip,
 }
 
 impl Default for Config {
@@ -94,6 +110,7 @@ impl Default for Config {
             character: CharacterOptions::default(),
             contact_tolerance: 0.1,
             residual_every_substep: false,
+            output_frame: OutputFrame::Ground,
         }
     }
 }
@@ -576,6 +593,16 @@ impl ImitationEnv {
         sum / count.max(1) as f32
     }
 
+    /// Height of the simulated floor in [`ImitationEnv::recorded_motion`]
+    /// (see [`OutputFrame`]).
+    pub fn output_floor(&self) -> f64 {
+        match self.config.output_frame {
+            OutputFrame::Ground => 0.0,
+            // The reference was shifted down by `floor` onto the simulated floor.
+            OutputFrame::Clip => self.reference.floor as f64,
+        }
+    }
+
     /// The simulated frames since the last reset, on the file's own skeleton, at the control rate.
     pub fn recorded_motion(&self) -> Result<Motion, PhysicsError> {
         if self.recorded_frames.len() < 2 {
@@ -635,8 +662,7 @@ impl ImitationEnv {
                     }
                 }
             }
-            // Back into the file's coordinates (the reference was shifted onto the simulated floor).
-            roots.push(wp[0] + DVec3::new(0.0, self.reference.floor as f64, 0.0));
+            roots.push(wp[0] + DVec3::new(0.0, self.output_floor(), 0.0));
             for j in 0..nj {
                 rots.push(match sk.parent(j) {
                     Some(p) => (wr[p].inverse() * wr[j]).normalize(),

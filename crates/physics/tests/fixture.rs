@@ -1,7 +1,9 @@
 //! Character, environment and honesty tests on the humanoid built in code.
 
 use physics::fixtures::{cmu_humanoid, sway};
-use physics::{CharacterOptions, CharacterSpec, Config, ImitationEnv, JointMapping, Role, Side};
+use physics::{
+    CharacterOptions, CharacterSpec, Config, ImitationEnv, JointMapping, OutputFrame, Role, Side,
+};
 
 #[test]
 fn character_of_the_cmu_style_skeleton() {
@@ -164,8 +166,7 @@ fn recorded_motion_is_the_simulation_not_the_reference() {
         ) < 1e-6
     );
     // Root follows the simulated pelvis.
-    let pelvis =
-        env.body_states()[0].pos.as_dvec3() + glam::DVec3::Y * env.reference().floor as f64;
+    let pelvis = env.body_states()[0].pos.as_dvec3() + glam::DVec3::Y * env.output_floor();
     assert!((rec.root_translation()[rec.frames() - 1] - pelvis).length() < 1e-4);
 }
 
@@ -295,7 +296,7 @@ fn recording_matches_the_simulated_bodies_with_an_extra_root() {
     }
     let rec = env.recorded_motion().unwrap();
     let world = rec.world_transforms(rec.frames() - 1);
-    let floor = glam::DVec3::Y * env.reference().floor as f64;
+    let floor = glam::DVec3::Y * env.output_floor();
     for (b, body) in env.spec().bodies.iter().enumerate() {
         let s = env.body_states()[b];
         let d = (world[body.driver].translation - (s.pos.as_dvec3() + floor)).length();
@@ -305,4 +306,52 @@ fn recording_matches_the_simulated_bodies_with_an_extra_root() {
         assert!(d < 5e-3 && a < 1e-4, "{}: {d} m {a} rad", body.name);
     }
     assert_eq!(rec.joints(), n);
+}
+
+/// A clip that sinks 5 cm into y = 0 is simulated standing on the floor; the
+/// recorded motion stands on y = 0 (default) or, on request, keeps the clip's
+/// own height.
+#[test]
+fn recorded_motion_stands_on_y0_whatever_the_clip_height() {
+    let motion = sway(cmu_humanoid(), 0.5, 120.0);
+    let mut sunk = motion.clone();
+    for p in sunk.root_translation_mut() {
+        p.y -= 0.05;
+    }
+    let record = |m: &motion::Motion, output_frame| {
+        let config = Config {
+            output_frame,
+            ..Config::default()
+        };
+        let mut env = ImitationEnv::new(m, &config).unwrap();
+        let action = vec![0.0; env.act_dim()];
+        while !env.step(&action).unwrap().done {}
+        env.recorded_motion().unwrap().root_translation().to_vec()
+    };
+    let lowest = |m: &motion::Motion| {
+        (0..m.frames())
+            .flat_map(|f| m.world_transforms(f).into_iter().map(|t| t.translation.y))
+            .fold(f64::INFINITY, f64::min)
+    };
+    assert!(lowest(&sunk) < lowest(&motion) - 0.049);
+    let (a, b) = (
+        record(&motion, OutputFrame::Ground),
+        record(&sunk, OutputFrame::Ground),
+    );
+    let (c, d) = (
+        record(&motion, OutputFrame::Clip),
+        record(&sunk, OutputFrame::Clip),
+    );
+    let max_dy = |x: &[glam::DVec3], y: &[glam::DVec3]| {
+        x.iter()
+            .zip(y)
+            .map(|(p, q)| (p.y - q.y).abs())
+            .fold(0.0, f64::max)
+    };
+    // The same simulation either way (the reference is put on the floor first).
+    assert!(max_dy(&a, &b) < 1e-3, "{}", max_dy(&a, &b));
+    // In the clip's frame the sunk clip's output is 5 cm lower.
+    for (p, q) in c.iter().zip(&d) {
+        assert!((p.y - q.y - 0.05).abs() < 1e-3, "{} {}", p.y, q.y);
+    }
 }

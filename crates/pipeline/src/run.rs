@@ -89,6 +89,7 @@ struct State<'a> {
     pending: HashMap<String, NewClip>,
     /// Correction summaries of corrected outputs awaiting debiasing.
     corrections: HashMap<String, CorrectionSummary>,
+    /// Accepted corrections of the source clips: the debiaser's training pairs.
     corrected_originals: HashMap<String, Motion>,
     debiaser: Option<debias::Debiaser>,
     failed: HashSet<String>,
@@ -272,8 +273,12 @@ impl<'a> State<'a> {
                 let outcome = stages::correct(step, clip, &src.motion, *seed, &dir, None, |p| {
                     on_event(Event::Correction { job, progress: p })
                 })?;
-                self.corrected_originals
-                    .insert(clip.clone(), outcome.motion);
+                // Only an accepted correction is a fair example of what the
+                // simulation does to a clip: a fall teaches the debiaser nonsense.
+                if outcome.report.accepted {
+                    self.corrected_originals
+                        .insert(clip.clone(), outcome.motion);
+                }
                 Ok(())
             }
             JobKind::Correct { clip, source, seed } => {
@@ -337,10 +342,9 @@ impl<'a> State<'a> {
                 let config = recipe.debias.as_ref().ok_or_else(|| missing("debias"))?;
                 let mut pairs = Vec::with_capacity(originals.len());
                 for name in originals {
-                    let corrected = self.corrected_originals.get(name).ok_or_else(|| {
-                        PipelineError::Job(format!("`{name}` has no corrected original"))
-                    })?;
-                    pairs.push((corrected.clone(), self.source(name)?.motion.clone()));
+                    if let Some(corrected) = self.corrected_originals.get(name) {
+                        pairs.push((corrected.clone(), self.source(name)?.motion.clone()));
+                    }
                 }
                 let model = stages::debias_train(config, &pairs)?;
                 model.save(&self.options.work.join("debias"))?;

@@ -258,11 +258,19 @@ pub fn finished_correction(
     }))
 }
 
-/// `debias_train`: fit the debiasing network on (corrected original, original) pairs.
+/// `debias_train`: fit the debiasing network on (corrected original, original)
+/// pairs. Callers pass only accepted corrections (a fall is not a bias).
 pub fn debias_train(
     config: &debias::TrainConfig,
     pairs: &[(Motion, Motion)],
 ) -> Result<debias::Debiaser, PipelineError> {
+    if pairs.is_empty() {
+        return Err(PipelineError::Job(
+            "no original clip passed its physical correction: the debiasing network has \
+             no (corrected, original) pair to learn from"
+                .into(),
+        ));
+    }
     Ok(debias::train(pairs, config)?.0)
 }
 

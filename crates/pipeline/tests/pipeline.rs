@@ -281,6 +281,23 @@ fn rejected_corrections_are_left_out_unless_kept() {
             .iter()
             .all(|o| o.entry.correction.as_ref().is_some_and(|c| !c.accepted))
     );
+
+    // The original was rejected too: it is no debiasing pair, and with none
+    // the debiasing step fails, naming why, and so do the clips waiting for it.
+    let debiased = Recipe::from_toml_str(&format!(
+        "{}\n[debias]\nhidden = [8]\niterations = 2\n",
+        text.replace("envs = 2", "envs = 2\n    keep_rejected = true")
+    ))
+    .expect("recipe");
+    let summary = run(&debiased, &clips, &options).expect("run");
+    assert!(summary.outputs.is_empty());
+    let (_, reason) = summary
+        .failures
+        .iter()
+        .find(|(job, _)| job == "debias_train")
+        .expect("debias_train failed");
+    assert!(reason.contains("no original clip passed"), "{reason}");
+    assert_eq!(summary.failures.len(), 3, "{:?}", summary.failures);
 }
 
 #[test]

@@ -208,7 +208,8 @@ pub struct JobOutput {
     /// Other artifacts for later jobs (correction checkpoints, the debiasing model).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub work: Vec<String>,
-    /// Clips whose correction was not accepted and that were left out.
+    /// Clips whose correction was not accepted: left out of the outputs (a
+    /// rejected original still warm-starts its variants but gives no debiasing pair).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rejected: Vec<String>,
 }

@@ -226,6 +226,10 @@ impl Job<'_> {
                     self.put(&name, bytes).await?;
                     output.work.push(name);
                 }
+                if !outcome.report.accepted {
+                    // Still a warm start for its variants, but no debiasing pair.
+                    output.rejected.push(clip);
+                }
                 Ok(output)
             }
             JobKind::Correct { clip, source, seed } => {
@@ -273,6 +277,9 @@ impl Job<'_> {
                 let mut pairs = Vec::with_capacity(originals.len());
                 for name in &originals {
                     let key = format!("correct_original:{name}");
+                    if self.dep(&key)?.rejected.contains(name) {
+                        continue;
+                    }
                     let file = self.dep_work_file(&key, "corrected.npz")?;
                     let bytes = self.input_file(&file).await?;
                     let (corrected, _) = blocking(move || pipeline::decode_clip(&bytes)).await?;

@@ -49,6 +49,11 @@ pub struct Args {
     /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
     #[arg(long)]
     calibrate_feet: bool,
+    /// Write the corrected clip at the input's own height (the simulated floor
+    /// at its median-frame foot level) instead of standing on y = 0; for data
+    /// whose floor is not y = 0.
+    #[arg(long)]
+    keep_clip_height: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -64,6 +69,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = args.calibrate_feet;
+    if args.keep_clip_height {
+        config.physics.output_frame = physics::OutputFrame::Clip;
+    }
     config.ppo.threads = args.threads;
     let terminal = std::io::stderr().is_terminal();
     let outcome = correct::correct(

@@ -672,6 +672,9 @@ struct TableCell {
 }
 
 fn run_table(args: TableArgs) -> anyhow::Result<()> {
+    if args.sets.contains(&SetKind::Physics) && !args.sets.contains(&SetKind::Vae) {
+        bail!("--sets physics corrects the VAE's samples: add vae to --sets");
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let started = Instant::now();
@@ -735,7 +738,7 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                     .iter()
                     .find(|(n, _)| n == "vae_near")
                     .map(|(_, c)| c.as_slice())
-                    .context("--sets physics corrects the VAE's samples: add vae to --sets")?;
+                    .context("no VAE samples to correct")?;
                 let work = args
                     .work
                     .clone()

@@ -7,8 +7,8 @@
 //! so that the rows do not depend on how busy the machine is. The steps are
 //! the pipeline's own (`pipeline::stages`): correct the training clips
 //! (originals), correct the samples warm-started from the first original's
-//! policy, train the debiasing network on (corrected original, original)
-//! pairs, apply it to the accepted corrected samples.
+//! policy, train the debiasing network on the (corrected original, original)
+//! pairs of accepted corrections, apply it to the accepted corrected samples.
 
 use std::path::Path;
 use std::time::Instant;
@@ -20,7 +20,7 @@ use serde::Serialize;
 /// How much physics the table spends.
 #[derive(clap::Args, Clone, Debug, Serialize)]
 pub struct PhysicsArgs {
-    /// VAE near samples corrected per class and fold (default: 3 per training clip).
+    /// VAE near samples corrected per class and fold (default: 2 per training clip).
     #[arg(long)]
     pub correct_count: Option<usize>,
     /// Training clips corrected for the debiasing network (default: all).
@@ -43,6 +43,8 @@ pub struct PhysicsArgs {
 pub struct PhysicsSummary {
     pub originals: usize,
     pub originals_accepted: usize,
+    /// (corrected, original) pairs the debiaser learnt from: the accepted originals.
+    pub debias_pairs: usize,
     pub samples: usize,
     pub samples_accepted: usize,
     /// Mean R_norm of the corrected samples (final rollout).
@@ -96,7 +98,7 @@ pub fn correct_and_debias(
     work: &Path,
 ) -> anyhow::Result<PhysicsSets> {
     let started = Instant::now();
-    let subset = spread(samples, args.correct_count.unwrap_or(3 * train.len()));
+    let subset = spread(samples, args.correct_count.unwrap_or(2 * train.len()));
     let originals = spread(train, args.correct_originals.unwrap_or(train.len()));
     anyhow::ensure!(
         !originals.is_empty() && !subset.is_empty(),
@@ -144,7 +146,9 @@ pub fn correct_and_debias(
         let o = run(i, name, m, &work.join("originals").join(name), None)?;
         summary.originals_accepted += usize::from(o.report.accepted);
         summary.ppo_samples += o.report.samples;
-        pairs.push((o.motion, m.clone()));
+        if o.report.accepted {
+            pairs.push((o.motion, m.clone()));
+        }
     }
     let warm = work
         .join("originals")
@@ -174,24 +178,32 @@ pub fn correct_and_debias(
     summary.mean_r_norm_action0 = r0 / n;
     summary.mean_residual_force_ratio = force / n;
 
-    let t = Instant::now();
-    let model = pipeline::stages::debias_train(
-        &debias::TrainConfig {
-            iterations: args.debias_iterations,
-            ..debias::TrainConfig::default()
-        },
-        &pairs,
-    )?;
-    let debiased = corrected
-        .iter()
-        .map(|(name, m)| Ok((name.clone(), pipeline::stages::debias_apply(&model, m)?)))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    eprintln!(
-        "debias: trained on {} pairs, applied to {} clips in {:.1} s",
-        pairs.len(),
-        debiased.len(),
-        t.elapsed().as_secs_f64()
-    );
+    summary.debias_pairs = pairs.len();
+    let debiased = if pairs.is_empty() {
+        // Nothing to learn the simulation's bias from: the row stays empty.
+        eprintln!("debias: no original passed its correction; no debiased set");
+        Vec::new()
+    } else {
+        let t = Instant::now();
+        let model = pipeline::stages::debias_train(
+            &debias::TrainConfig {
+                iterations: args.debias_iterations,
+                ..debias::TrainConfig::default()
+            },
+            &pairs,
+        )?;
+        let debiased = corrected
+            .iter()
+            .map(|(name, m)| Ok((name.clone(), pipeline::stages::debias_apply(&model, m)?)))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        eprintln!(
+            "debias: trained on {} pairs, applied to {} clips in {:.1} s",
+            pairs.len(),
+            debiased.len(),
+            t.elapsed().as_secs_f64()
+        );
+        debiased
+    };
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(PhysicsSets {
         subset,
