@@ -44,7 +44,11 @@
 //! floating 0.25 -> 0.
 //!
 //! The corrected clip is at the 30 Hz control rate; plausibility before is
-//! measured on the source clip at its own rate.
+//! measured on the source clip at its own rate. These figures were measured
+//! when the output kept the input's height (`physics::OutputFrame::Clip`);
+//! the default now stands it on y = 0, which moves penetration and floating by
+//! the clip's median-frame foot level (a few mm for these clips; 5 cm for VAE
+//! samples that sank, see crates/eval/README.md).
 
 pub mod job;
 pub mod report;
