@@ -144,7 +144,6 @@ pub fn correct_and_debias(
     let mut pairs = Vec::with_capacity(originals.len());
     for (i, (name, m)) in originals.iter().enumerate() {
         let o = run(i, name, m, &work.join("originals").join(name), None)?;
-        summary.originals_accepted += usize::from(o.report.accepted);
         summary.ppo_samples += o.report.samples;
         if o.report.accepted {
             pairs.push((o.motion, m.clone()));
@@ -178,6 +177,8 @@ pub fn correct_and_debias(
     summary.mean_r_norm_action0 = r0 / n;
     summary.mean_residual_force_ratio = force / n;
 
+    // The accepted originals are exactly the debiaser's training pairs.
+    summary.originals_accepted = pairs.len();
     summary.debias_pairs = pairs.len();
     let debiased = if pairs.is_empty() {
         // Nothing to learn the simulation's bias from: the row stays empty.
