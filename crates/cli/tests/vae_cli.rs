@@ -80,14 +80,18 @@ fn debias_trains_on_pairs_and_applies_to_corrected_clips() {
         "16,16",
     ]));
     assert!(dir.path().join("model/debias.json").is_file());
-    ok(motionaug(&[
+    let applied = motionaug(&[
         "debias",
         "apply",
         &p("model"),
         &p("kick30.bvh"),
         "--out",
         &p("debiased"),
-    ]));
+    ]);
+    let stderr = String::from_utf8_lossy(&applied.stderr).to_string();
+    ok(applied);
+    // The kick stands on its right foot: planted frames are found and kept.
+    assert!(stderr.contains("planted foot frames kept"), "{stderr}");
     let out = dir.path().join("debiased/kick30.bvh");
     let m = motion::bvh::read(&out, motion::Unit::Auto).expect("debiased BVH");
     assert_eq!(m.joints(), 31);

@@ -2,11 +2,16 @@
 //!
 //! A frame's *state* is `[root height, root velocity (3, heading frame, m/s),
 //! root tilt (6D, heading removed), joint rotations (6D each, local)]`; the
-//! network sees the state and its difference to the previous frame and predicts
-//! a change of the state. Removing the heading keeps the features the same for
-//! a clip walked in any direction, so the network learns the bias, not the route;
-//! the corrected clip keeps its own heading and horizontal path, integrated from
-//! the debiased velocities.
+//! network sees the state and its difference to the previous frame and
+//! predicts a change of the *rotations* (tilt and joints, [`output_dim`]).
+//! Removing the heading keeps the features the same for a clip walked in any
+//! direction, so the network learns the bias, not the route.
+//!
+//! The root's height and path are inputs only: the debiased clip keeps the
+//! corrected clip's root translation, the part of the motion the simulation
+//! made physically consistent with its ground contacts. (Session 3 also
+//! predicted a root height and velocity change; integrated over a VAE sample
+//! it lifted feet off the ground in half the frames.)
 
 use motion::Motion;
 use motion::glam::{DQuat, DVec3};
@@ -16,6 +21,15 @@ use motion::rotation::{from_6d, heading, to_6d};
 pub fn state_dim(joints: usize) -> usize {
     4 + 6 * joints
 }
+
+/// Numbers the network predicts per frame: the 6D rotation change of the root
+/// tilt and of every non-root joint (the state without its first four numbers).
+pub fn output_dim(joints: usize) -> usize {
+    6 * joints
+}
+
+/// Where the rotations start in a state.
+pub const ROTATIONS_AT: usize = 4;
 
 /// Input numbers per frame: the state and its frame difference.
 pub fn input_dim(joints: usize) -> usize {
@@ -69,17 +83,12 @@ pub fn inputs(states: &[f32], dim: usize) -> Vec<f32> {
     out
 }
 
-/// Rebuild a clip from `motion` with its states replaced by `new_states`: the
-/// heading of each frame is kept, the tilt and joint rotations come from the
-/// 6D values, the height from the state and the horizontal path is integrated
-/// from the new velocities (starting where `motion` starts).
-pub fn apply_states(motion: &Motion, new_states: &[f32]) -> Result<Motion, motion::MotionError> {
+/// Rebuild a clip from `motion` with its rotations replaced by
+/// `rotations` (`[frame][output_dim]`: root tilt then joints, 6D): each frame
+/// keeps its heading and `motion`'s root translation.
+pub fn apply_rotations(motion: &Motion, rotations: &[f32]) -> Result<Motion, motion::MotionError> {
     let nj = motion.joints();
-    let dim = state_dim(nj);
-    let n = motion.frames();
-    let dt = 1.0 / motion.fps();
-    let mut root = Vec::with_capacity(n);
-    let mut rotations = Vec::with_capacity(n * nj);
+    let dim = output_dim(nj);
     let six = |s: &[f32], at: usize| {
         let mut v = [0.0f64; 6];
         for (k, x) in v.iter_mut().enumerate() {
@@ -87,21 +96,24 @@ pub fn apply_states(motion: &Motion, new_states: &[f32]) -> Result<Motion, motio
         }
         from_6d(&v)
     };
-    let mut pos = motion.root_translation()[0];
-    for t in 0..n {
-        let s = &new_states[t * dim..(t + 1) * dim];
+    let mut out = Vec::with_capacity(motion.frames() * nj);
+    for t in 0..motion.frames() {
+        let s = &rotations[t * dim..(t + 1) * dim];
         let yaw = DQuat::from_rotation_y(heading(motion.rotation(t, 0)));
-        if t > 0 {
-            let v = yaw * DVec3::new(s[1] as f64, s[2] as f64, s[3] as f64);
-            pos += v * dt;
-        }
-        root.push(DVec3::new(pos.x, s[0] as f64, pos.z));
-        rotations.push((yaw * six(s, 4)).normalize());
+        out.push((yaw * six(s, 0)).normalize());
         for j in 1..nj {
-            rotations.push(six(s, 4 + 6 * j));
+            out.push(six(s, 6 * j));
         }
     }
-    Motion::new(motion.skeleton().clone(), motion.fps(), root, rotations)
+    motion.with_frames(motion.fps(), motion.root_translation().to_vec(), out)
+}
+
+/// The rotation part of every state, `[frame][output_dim]`.
+pub fn rotations_of(states: &[f32], joints: usize) -> Vec<f32> {
+    states
+        .chunks_exact(state_dim(joints))
+        .flat_map(|s| s[ROTATIONS_AT..].iter().copied())
+        .collect()
 }
 
 #[cfg(test)]
@@ -132,7 +144,9 @@ pub(crate) mod tests {
         let m = walk();
         let s = states(&m);
         assert_eq!(s.len(), m.frames() * state_dim(m.joints()));
-        let back = apply_states(&m, &s).expect("rebuild");
+        let r = rotations_of(&s, m.joints());
+        assert_eq!(r.len(), m.frames() * output_dim(m.joints()));
+        let back = apply_rotations(&m, &r).expect("rebuild");
         for t in 0..m.frames() {
             let d = (back.root_translation()[t] - m.root_translation()[t]).length();
             assert!(d < 1e-5, "frame {t}: root off by {d}");

@@ -8,14 +8,19 @@
 //!
 //! * [`features`]: the per-frame input (root height, root velocity in the
 //!   heading frame, 6D joint rotations, and their frame differences) and the
-//!   output (a correction of the first three groups), and back to a clip.
+//!   output (a correction of the rotations), and back to a clip that keeps the
+//!   corrected root path.
+//! * [`contacts`]: after the network, the corrected clip's planted feet are put
+//!   back with leg IK, so debiasing does not bring back skating and floating.
 //! * [`model`]: the MLP (4 x 512 ReLU in the paper).
 //! * [`train`]: fitting the MLP on pairs; [`Debiaser`] applies, saves and loads it.
 
+pub mod contacts;
 pub mod features;
 pub mod model;
 pub mod train;
 
+pub use contacts::{ContactConfig, ContactReport};
 pub use model::MlpConfig;
 pub use train::{Debiaser, TrainConfig, TrainReport, train};
 

@@ -4,8 +4,10 @@
 //! resampled to the corrected clip's frame rate and both are cut to the shorter
 //! length (a correction that fell ends early). Inputs and targets are
 //! standardised with statistics of the training set, which are saved with the
-//! weights. The target is the change of state `original - corrected`; applying
-//! adds the predicted change to a corrected clip's states.
+//! weights. The target is the change of rotations (root tilt and joints, 6D)
+//! `original - corrected`; applying adds the predicted change to a corrected
+//! clip's rotations, keeps its root translation and then puts its planted feet
+//! back where the corrected clip has them ([`crate::contacts`]).
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,7 +20,10 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::features::{apply_states, input_dim, inputs, state_dim, states};
+use crate::contacts::{self, ContactConfig, ContactReport};
+use crate::features::{
+    apply_rotations, input_dim, inputs, output_dim, rotations_of, state_dim, states,
+};
 use crate::model::{Mlp, MlpConfig};
 use crate::{DebiasError, Result};
 
@@ -33,6 +38,8 @@ pub struct TrainConfig {
     pub learning_rate: f64,
     pub weight_decay: f64,
     pub seed: u64,
+    /// How the corrected clip's foot contacts are kept when applying.
+    pub contacts: ContactConfig,
 }
 
 impl Default for TrainConfig {
@@ -45,6 +52,7 @@ impl Default for TrainConfig {
             learning_rate: 1e-3,
             weight_decay: 1e-4,
             seed: 0,
+            contacts: ContactConfig::default(),
         }
     }
 }
@@ -67,7 +75,7 @@ impl TrainConfig {
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
             return bad(format!("weight_decay {} is negative", self.weight_decay));
         }
-        Ok(())
+        self.contacts.validate()
     }
 }
 
@@ -77,7 +85,7 @@ pub struct TrainReport {
     pub pairs: usize,
     pub frames: usize,
     pub iterations: usize,
-    /// Mean squared state error (standardised units) before training: corrected vs original.
+    /// Mean squared rotation error (standardised units) before training: corrected vs original.
     pub loss_before: f64,
     /// The same after training (training set).
     pub loss_after: f64,
@@ -136,12 +144,15 @@ struct Meta {
     joints: usize,
     fps: f64,
     mlp: MlpConfig,
+    contacts: ContactConfig,
     input: Standardiser,
     output: Standardiser,
     report: TrainReport,
 }
 
-const FORMAT: u32 = 1;
+/// 2: the network predicts rotations only and contacts are restored (1 also
+/// predicted the root's height and velocity).
+const FORMAT: u32 = 2;
 const WEIGHTS: &str = "debias.safetensors";
 const META: &str = "debias.json";
 
@@ -186,7 +197,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     };
     let joints = first.joints();
     let fps = first.fps();
-    let (sd, id) = (state_dim(joints), input_dim(joints));
+    let (sd, id, od) = (state_dim(joints), input_dim(joints), output_dim(joints));
     let mut x_rows = Vec::new();
     let mut y_rows = Vec::new();
     for (i, (corrected, original)) in pairs.iter().enumerate() {
@@ -199,23 +210,24 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         }
         let (c, o) = aligned(corrected, original)?;
         x_rows.extend(inputs(&c, sd));
+        let (c, o) = (rotations_of(&c, joints), rotations_of(&o, joints));
         y_rows.extend(o.iter().zip(&c).map(|(o, c)| o - c));
     }
-    let frames = y_rows.len() / sd;
+    let frames = y_rows.len() / od;
     if frames < 2 {
         return Err(DebiasError::Data(
             "fewer than two frames of training data".into(),
         ));
     }
     let input = Standardiser::fit(&x_rows, id);
-    let output = Standardiser::fit(&y_rows, sd);
+    let output = Standardiser::fit(&y_rows, od);
     let x = Tensor::from_vec(input.apply(&x_rows), (frames, id), &Device::Cpu)?;
-    let y = Tensor::from_vec(output.apply(&y_rows), (frames, sd), &Device::Cpu)?;
+    let y = Tensor::from_vec(output.apply(&y_rows), (frames, od), &Device::Cpu)?;
 
     let mlp_config = MlpConfig {
         input: id,
         hidden: config.hidden.clone(),
-        output: sd,
+        output: od,
     };
     let vars = VarMap::new();
     let mlp = Mlp::seeded(&mlp_config, &vars, config.seed)?;
@@ -228,8 +240,8 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         },
     )?;
     // Loss of "no correction" in standardised target units: the zero change.
-    let zero = output.apply(&vec![0.0; sd]);
-    let zero = Tensor::from_vec(zero, (1, sd), &Device::Cpu)?;
+    let zero = output.apply(&vec![0.0; od]);
+    let zero = Tensor::from_vec(zero, (1, od), &Device::Cpu)?;
     let loss_before = y
         .broadcast_sub(&zero)?
         .sqr()?
@@ -274,6 +286,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         joints,
         fps,
         mlp: mlp_config,
+        contacts: config.contacts,
         input,
         output,
         report: report.clone(),
@@ -298,6 +311,11 @@ impl Debiaser {
 
     /// Debias a corrected clip (same skeleton layout and frame rate as training).
     pub fn apply(&self, corrected: &Motion) -> Result<Motion> {
+        Ok(self.apply_with_report(corrected)?.0)
+    }
+
+    /// [`Debiaser::apply`], and what restoring the contacts did.
+    pub fn apply_with_report(&self, corrected: &Motion) -> Result<(Motion, ContactReport)> {
         if corrected.joints() != self.meta.joints {
             return Err(DebiasError::Data(format!(
                 "the clip has {} joints, the model was trained on {}",
@@ -317,8 +335,10 @@ impl Debiaser {
         let x = Tensor::from_vec(x, (frames, 2 * sd), &Device::Cpu)?;
         let delta = self.mlp.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
         let delta = self.meta.output.invert(&delta);
-        let new: Vec<f32> = s.iter().zip(&delta).map(|(a, d)| a + d).collect();
-        Ok(apply_states(&corrected, &new)?)
+        let rotations = rotations_of(&s, self.meta.joints);
+        let new: Vec<f32> = rotations.iter().zip(&delta).map(|(a, d)| a + d).collect();
+        let debiased = apply_rotations(&corrected, &new)?;
+        contacts::restore(&debiased, &corrected, &self.meta.contacts)
     }
 
     /// Write `debias.safetensors` and `debias.json` into `dir` (created if missing).
@@ -374,28 +394,37 @@ impl Debiaser {
 mod tests {
     use super::*;
     use crate::features::tests::walk;
-    use motion::glam::{DQuat, DVec3};
+    use motion::glam::DQuat;
 
-    /// `m` with a systematic bias: root 4 cm lower, joint 3 bent by 0.2 rad.
+    /// The joints the test bias bends: an upper arm and the upper back.
+    fn bent_joints(m: &Motion) -> [usize; 2] {
+        let s = m.skeleton();
+        [
+            s.find("lhumerus").expect("HDM05 lhumerus"),
+            s.find("upperback").expect("HDM05 upperback"),
+        ]
+    }
+
+    /// `m` with a systematic bias: the left upper arm turned by 0.3 rad and the
+    /// upper back by 0.15 rad in every frame.
     fn biased(m: &Motion) -> Motion {
         let nj = m.joints();
-        let root = m
-            .root_translation()
-            .iter()
-            .map(|p| *p - DVec3::Y * 0.04)
-            .collect();
+        let [arm, back] = bent_joints(m);
         let mut rot = m.rotations().to_vec();
         for t in 0..m.frames() {
-            rot[t * nj + 3] *= DQuat::from_rotation_x(0.2);
+            rot[t * nj + arm] *= DQuat::from_rotation_x(0.3);
+            rot[t * nj + back] *= DQuat::from_rotation_z(0.15);
         }
-        m.with_frames(m.fps(), root, rot).expect("motion")
+        m.with_frames(m.fps(), m.root_translation().to_vec(), rot)
+            .expect("motion")
     }
 
     fn error(a: &Motion, b: &Motion) -> f64 {
         let mut e = 0.0;
         for t in 0..a.frames() {
-            e += (a.root_translation()[t].y - b.root_translation()[t].y).abs();
-            e += motion::rotation::angle_between(a.rotation(t, 3), b.rotation(t, 3));
+            for j in bent_joints(a) {
+                e += motion::rotation::angle_between(a.rotation(t, j), b.rotation(t, j));
+            }
         }
         e / a.frames() as f64
     }
@@ -417,8 +446,11 @@ mod tests {
             train(&[(corrected.clone(), original.clone())], &tiny()).expect("train");
         assert!(report.loss_after < 0.1 * report.loss_before, "{report:?}");
         let before = error(&corrected, &original);
-        let after = error(&model.apply(&corrected).expect("apply"), &original);
+        let debiased = model.apply(&corrected).expect("apply");
+        let after = error(&debiased, &original);
         assert!(after < 0.2 * before, "error {before} -> {after}");
+        // The root path is the corrected clip's.
+        assert_eq!(debiased.root_translation(), corrected.root_translation());
     }
 
     #[test]

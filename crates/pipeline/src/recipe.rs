@@ -27,6 +27,8 @@
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
+//! [debias.contacts]         # keep the corrected clip's planted feet (debias::ContactConfig)
+//! restore = true
 //! ```
 //!
 //! The same structure is accepted as JSON by the HTTP service. Unknown keys are

@@ -38,6 +38,10 @@ enum What {
         hidden: Vec<usize>,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Do not put the corrected clip's planted feet back after the network
+        /// (saved with the model; by default they are, see the debias crate).
+        #[arg(long)]
+        no_contacts: bool,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -63,7 +67,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             iterations,
             hidden,
             seed,
-        } => train(&pairs, &clip, &out, iterations, hidden, seed),
+            no_contacts,
+        } => train(&pairs, &clip, &out, iterations, hidden, seed, no_contacts),
         What::Apply {
             model,
             inputs,
@@ -99,6 +104,7 @@ fn train(
     iterations: usize,
     hidden: Vec<usize>,
     seed: u64,
+    no_contacts: bool,
 ) -> anyhow::Result<()> {
     let mut loaded = Vec::with_capacity(pairs.len());
     for pair in pairs {
@@ -114,6 +120,10 @@ fn train(
         iterations,
         hidden,
         seed,
+        contacts: debias::ContactConfig {
+            restore: !no_contacts,
+            ..debias::ContactConfig::default()
+        },
         ..TrainConfig::default()
     };
     let (model, report) = debias::train(&loaded, &config).context("training the debiaser")?;
@@ -141,10 +151,15 @@ fn apply(model: &Path, inputs: &[PathBuf], clip: &ClipArgs, out: &Path) -> anyho
         .collect::<anyhow::Result<Vec<_>>>()?;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     for (path, motion) in inputs.iter().zip(&clips) {
-        let debiased = model
-            .apply(motion)
+        let (debiased, contacts) = model
+            .apply_with_report(motion)
             .with_context(|| format!("debiasing {}", path.display()))?;
         let name = clip_name(path);
+        eprintln!(
+            "{name}: {} planted foot frames kept (largest ankle error {:.1} mm)",
+            contacts.planted,
+            contacts.max_ankle_error_m * 1e3
+        );
         write_atomic(
             &out.join(format!("{name}.bvh")),
             &motion::bvh::to_bytes(&debiased),

@@ -1,0 +1,405 @@
+//! Keeping the simulation's ground contacts through debiasing.
+//!
+//! Why this exists: the debiasing network changes joint rotations frame by
+//! frame, and a leg rotated by a few degrees moves its planted foot: the
+//! session-3 debiaser (which also rewrote the root's height and path) turned
+//! corrected clips that stood still on their feet back into skating, floating
+//! ones (kick: foot skating 0.10 -> 0.33 m/s, floating frames 17 -> 54 %). The
+//! physically corrected clip is the one thing that knows where the feet touch
+//! the ground, so after the network has run, every foot the corrected clip has
+//! planted is put back where the simulation put it:
+//!
+//! * A foot is planted at a frame of the corrected clip when its lowest point
+//!   (the ankle, the joints below it and their end sites) is within
+//!   `height_band_m` of that foot's planted height (the 5th percentile of its
+//!   lowest point over the clip) and its ankle moves slower than
+//!   `max_speed_m_s` horizontally.
+//! * In planted frames the leg is solved with the two-bone IK of the synthesis
+//!   crate (`synth::ik::limb`, joint limits respected) so the ankle reaches the
+//!   corrected clip's ankle, the foot takes the corrected clip's world
+//!   orientation and the joints below it (toes) their corrected rotations.
+//! * The weight of that edit ramps linearly to zero over `blend_s` on either
+//!   side of a contact, so the leg does not pop when a contact starts or ends.
+//!
+//! The root is not touched here: the debiased clip already carries the
+//! corrected clip's root path (see [`crate::features::apply_rotations`]).
+
+use motion::Motion;
+use motion::glam::{DQuat, DVec3};
+use motion::skeleton::Transform;
+use serde::{Deserialize, Serialize};
+use synth::ik::limb::{EffectorOrientation, Limb, SolveOptions, solve_frame};
+
+use crate::{DebiasError, Result};
+
+/// How contacts are found and restored.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ContactConfig {
+    /// Restore the corrected clip's contacts at all (off = the network's output as is).
+    pub restore: bool,
+    /// A foot whose lowest point is this close to its planted height may be in contact.
+    pub height_band_m: f64,
+    /// Largest horizontal ankle speed of a planted foot.
+    pub max_speed_m_s: f64,
+    /// Ramp of the restoring edit before and after a contact.
+    pub blend_s: f64,
+}
+
+impl Default for ContactConfig {
+    fn default() -> Self {
+        ContactConfig {
+            restore: true,
+            height_band_m: 0.03,
+            max_speed_m_s: 0.5,
+            blend_s: 0.1,
+        }
+    }
+}
+
+impl ContactConfig {
+    pub fn validate(&self) -> Result<()> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(self.height_band_m) || !positive(self.max_speed_m_s) {
+            return Err(DebiasError::Config(format!(
+                "contact height_band_m {} and max_speed_m_s {} must be positive",
+                self.height_band_m, self.max_speed_m_s
+            )));
+        }
+        if !(self.blend_s.is_finite() && self.blend_s >= 0.0) {
+            return Err(DebiasError::Config(format!(
+                "contact blend_s {} is negative",
+                self.blend_s
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What restoring did to one clip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct ContactReport {
+    /// Legs found (two on a human skeleton; 0 = nothing could be restored).
+    pub legs: usize,
+    /// Planted (foot, frame) pairs in the corrected clip.
+    pub planted: usize,
+    /// Largest ankle distance to the corrected clip's ankle in planted frames after restoring, m.
+    pub max_ankle_error_m: f64,
+}
+
+/// A leg: its IK chain and the joints of its foot (the ankle and everything below).
+struct Leg {
+    limb: Limb,
+    foot: Vec<usize>,
+}
+
+fn legs(motion: &Motion, frames: &[Vec<Transform>]) -> Vec<Leg> {
+    let skeleton = motion.skeleton();
+    synth::names::feet(skeleton)
+        .into_iter()
+        .filter_map(|ankle| {
+            let mut limb = Limb::new(skeleton, ankle).ok()?;
+            limb.estimate_hinge(skeleton, frames);
+            let mut foot = vec![ankle];
+            let mut i = 0;
+            while i < foot.len() {
+                foot.extend(skeleton.children(foot[i]));
+                i += 1;
+            }
+            Some(Leg { limb, foot })
+        })
+        .collect()
+}
+
+/// Height of the lowest point of a foot (its joints and end sites) in one frame.
+fn lowest(motion: &Motion, x: &[Transform], foot: &[usize]) -> f64 {
+    let skeleton = motion.skeleton();
+    foot.iter()
+        .flat_map(|&j| {
+            let end = skeleton
+                .joint(j)
+                .end_site
+                .map(|e| x[j].translation + x[j].rotation * e);
+            std::iter::once(x[j].translation).chain(end)
+        })
+        .map(|p| p.y)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Per frame, is the leg's foot planted in `frames` (world transforms of a clip)?
+fn planted(
+    motion: &Motion,
+    frames: &[Vec<Transform>],
+    leg: &Leg,
+    config: &ContactConfig,
+) -> Vec<bool> {
+    let n = frames.len();
+    let heights: Vec<f64> = frames
+        .iter()
+        .map(|x| lowest(motion, x, &leg.foot))
+        .collect();
+    let mut sorted = heights.clone();
+    sorted.sort_by(f64::total_cmp);
+    let floor = sorted[(n - 1) * 5 / 100];
+    let ankle = leg.limb.effector;
+    let horizontal = |v: DVec3| DVec3::new(v.x, 0.0, v.z).length();
+    (0..n)
+        .map(|t| {
+            let (a, b) = if t + 1 < n {
+                (t, t + 1)
+            } else {
+                (t.saturating_sub(1), t)
+            };
+            let speed = if a == b {
+                0.0
+            } else {
+                horizontal(frames[b][ankle].translation - frames[a][ankle].translation)
+                    * motion.fps()
+            };
+            heights[t] <= floor + config.height_band_m && speed <= config.max_speed_m_s
+        })
+        .collect()
+}
+
+/// Edit weight per frame: 1 in contact, ramping down linearly over `ramp` frames.
+fn weights(contact: &[bool], ramp: usize) -> Vec<f64> {
+    let n = contact.len();
+    let mut distance = vec![usize::MAX; n];
+    let mut last = None;
+    for t in 0..n {
+        if contact[t] {
+            last = Some(t);
+        }
+        if let Some(c) = last {
+            distance[t] = t - c;
+        }
+    }
+    let mut next = None;
+    for t in (0..n).rev() {
+        if contact[t] {
+            next = Some(t);
+        }
+        if let Some(c) = next {
+            distance[t] = distance[t].min(c - t);
+        }
+    }
+    distance
+        .iter()
+        .map(|&d| {
+            if d == usize::MAX {
+                0.0
+            } else {
+                (1.0 - d as f64 / (ramp + 1) as f64).max(0.0)
+            }
+        })
+        .collect()
+}
+
+fn world(motion: &Motion, root: DVec3, pose: &[DQuat], out: &mut [Transform]) {
+    motion.skeleton().forward(root, pose, out);
+}
+
+/// Put the feet of `debiased` back where `corrected` plants them. Both clips
+/// must have the same skeleton layout and frame count (`debiased` is made from
+/// `corrected`); `debiased`'s root path is kept.
+pub fn restore(
+    debiased: &Motion,
+    corrected: &Motion,
+    config: &ContactConfig,
+) -> Result<(Motion, ContactReport)> {
+    config.validate()?;
+    if debiased.joints() != corrected.joints() || debiased.frames() != corrected.frames() {
+        return Err(DebiasError::Data(format!(
+            "restoring contacts needs the clip debiasing started from: {} joints x {} frames \
+             against {} x {}",
+            debiased.joints(),
+            debiased.frames(),
+            corrected.joints(),
+            corrected.frames()
+        )));
+    }
+    let n = corrected.frames();
+    let mut report = ContactReport::default();
+    if !config.restore || n == 0 {
+        return Ok((debiased.clone(), report));
+    }
+    let reference: Vec<Vec<Transform>> = (0..n).map(|t| corrected.world_transforms(t)).collect();
+    let legs = legs(corrected, &reference);
+    report.legs = legs.len();
+    if legs.is_empty() {
+        tracing::warn!("no legs found by joint names: contacts not restored");
+        return Ok((debiased.clone(), report));
+    }
+    let ramp = (config.blend_s * corrected.fps()).round() as usize;
+    let leg_weights: Vec<(Vec<bool>, Vec<f64>)> = legs
+        .iter()
+        .map(|leg| {
+            let c = planted(corrected, &reference, leg, config);
+            let w = weights(&c, ramp);
+            (c, w)
+        })
+        .collect();
+    report.planted = leg_weights
+        .iter()
+        .map(|(c, _)| c.iter().filter(|p| **p).count())
+        .sum();
+
+    let skeleton = debiased.skeleton();
+    let nj = debiased.joints();
+    let mut rotations = Vec::with_capacity(n * nj);
+    let mut x = vec![Transform::IDENTITY; nj];
+    for t in 0..n {
+        let root = debiased.root_translation()[t];
+        let original = debiased.pose(t).to_vec();
+        let mut pose = original.clone();
+        for (leg, (contact, w)) in legs.iter().zip(&leg_weights) {
+            let w = w[t];
+            if w <= 0.0 {
+                continue;
+            }
+            let ankle = leg.limb.effector;
+            let target_x = &reference[t];
+            world(debiased, root, &pose, &mut x);
+            let target = x[ankle].translation.lerp(target_x[ankle].translation, w);
+            let options = SolveOptions {
+                orientation: EffectorOrientation::World,
+                respect_limits: true,
+            };
+            solve_frame(
+                skeleton, &leg.limb, &x, &mut pose, &original, target, options,
+            );
+            world(debiased, root, &pose, &mut x);
+            let parent = skeleton.parent(ankle).unwrap_or(0);
+            let want = x[ankle].rotation.slerp(target_x[ankle].rotation, w);
+            pose[ankle] = (x[parent].rotation.inverse() * want).normalize();
+            for &j in &leg.foot[1..] {
+                pose[j] = pose[j].slerp(corrected.rotation(t, j), w).normalize();
+            }
+            if contact[t] {
+                world(debiased, root, &pose, &mut x);
+                let e = (x[ankle].translation - target_x[ankle].translation).length();
+                report.max_ankle_error_m = report.max_ankle_error_m.max(e);
+            }
+        }
+        rotations.extend(pose);
+    }
+    let restored = debiased.with_frames(
+        debiased.fps(),
+        debiased.root_translation().to_vec(),
+        rotations,
+    )?;
+    Ok((restored, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::tests::walk;
+
+    #[test]
+    fn weights_ramp_around_contacts() {
+        let c = [false, false, false, true, true, false, false, false, false];
+        let w = weights(&c, 2);
+        let want = [
+            0.0,
+            1.0 / 3.0,
+            2.0 / 3.0,
+            1.0,
+            1.0,
+            2.0 / 3.0,
+            1.0 / 3.0,
+            0.0,
+            0.0,
+        ];
+        for (a, b) in w.iter().zip(want) {
+            assert!((a - b).abs() < 1e-12, "{w:?}");
+        }
+        assert!(weights(&[false; 4], 3).iter().all(|w| *w == 0.0));
+    }
+
+    /// `m` with both knees bent further by `angle` in every frame.
+    fn bent_knees(m: &Motion, angle: f64) -> Motion {
+        let s = m.skeleton();
+        let knees: Vec<usize> = synth::names::feet(s)
+            .into_iter()
+            .filter_map(|a| s.parent(a))
+            .collect();
+        assert_eq!(knees.len(), 2, "two knees on the HDM05 skeleton");
+        let nj = m.joints();
+        let mut rot = m.rotations().to_vec();
+        for t in 0..m.frames() {
+            for &k in &knees {
+                rot[t * nj + k] *= DQuat::from_rotation_x(angle);
+            }
+        }
+        m.with_frames(m.fps(), m.root_translation().to_vec(), rot)
+            .expect("motion")
+    }
+
+    fn ankle_error(a: &Motion, b: &Motion, t: usize, ankle: usize) -> f64 {
+        (a.world_transforms(t)[ankle].translation - b.world_transforms(t)[ankle].translation)
+            .length()
+    }
+
+    #[test]
+    fn planted_feet_go_back_to_the_corrected_clip() {
+        let corrected = walk();
+        let edited = bent_knees(&corrected, 0.3);
+        let (restored, report) =
+            restore(&edited, &corrected, &ContactConfig::default()).expect("restore");
+        assert_eq!(report.legs, 2);
+        assert!(report.planted > corrected.frames() / 2, "{report:?}");
+        assert!(report.max_ankle_error_m < 2e-3, "{report:?}");
+        // Before restoring, bending the knees moved the planted feet by centimetres.
+        let reference: Vec<_> = (0..corrected.frames())
+            .map(|t| corrected.world_transforms(t))
+            .collect();
+        let leg = &legs(&corrected, &reference)[0];
+        let contact = planted(&corrected, &reference, leg, &ContactConfig::default());
+        let t = contact.iter().position(|c| *c).expect("a planted frame");
+        let ankle = leg.limb.effector;
+        assert!(ankle_error(&edited, &corrected, t, ankle) > 0.02);
+        assert!(ankle_error(&restored, &corrected, t, ankle) < 2e-3);
+        // The foot's world orientation is the corrected one too.
+        let a = restored.world_transforms(t)[ankle].rotation;
+        let b = reference[t][ankle].rotation;
+        assert!(motion::rotation::angle_between(a, b) < 1e-3);
+        // Root untouched; upper body untouched.
+        assert_eq!(restored.root_translation(), edited.root_translation());
+        let head = corrected.skeleton().find("head").expect("HDM05 head");
+        for t in 0..corrected.frames() {
+            assert_eq!(restored.rotation(t, head), edited.rotation(t, head));
+        }
+    }
+
+    #[test]
+    fn restoring_can_be_switched_off_and_checks_its_input() {
+        let corrected = walk();
+        let edited = bent_knees(&corrected, 0.2);
+        let off = ContactConfig {
+            restore: false,
+            ..ContactConfig::default()
+        };
+        let (same, _) = restore(&edited, &corrected, &off).expect("restore");
+        assert_eq!(same.rotations(), edited.rotations());
+        let short = corrected
+            .with_frames(
+                corrected.fps(),
+                corrected.root_translation()[..10].to_vec(),
+                corrected.rotations()[..10 * corrected.joints()].to_vec(),
+            )
+            .expect("short");
+        assert!(matches!(
+            restore(&edited, &short, &ContactConfig::default()),
+            Err(DebiasError::Data(_))
+        ));
+        let bad = ContactConfig {
+            height_band_m: -1.0,
+            ..ContactConfig::default()
+        };
+        assert!(matches!(
+            restore(&edited, &corrected, &bad),
+            Err(DebiasError::Config(_))
+        ));
+    }
+}
