@@ -444,9 +444,14 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
         md.contains("| vae_sub |") && md.contains("## Correction"),
         "{md}"
     );
-    // Corrections are kept in OUT/work: a rerun reuses them and gives the same sets.
+    // Corrections and the VAE are kept in OUT/work: a rerun reuses them and
+    // gives the same sets.
     assert!(out.join("work/bk_sneak/samples").is_dir());
-    ok(motionaug(&args));
+    assert!(out.join("work/bk_sneak/vae-2it/model.json").is_file());
+    let rerun = motionaug(&args);
+    let stderr = String::from_utf8_lossy(&rerun.stderr).to_string();
+    ok(rerun);
+    assert!(stderr.contains("vae: reusing"), "{stderr}");
     let second = read();
     assert_eq!(second["cells"][0]["synth"], first["cells"][0]["synth"]);
     assert_eq!(

@@ -20,6 +20,22 @@
 //!   orientation and the joints below it (toes) their corrected rotations.
 //! * The weight of that edit ramps linearly to zero over `blend_s` on either
 //!   side of a contact, so the leg does not pop when a contact starts or ends.
+//! * With `flatten_soles`, a planted foot whose lowest point is higher than
+//!   the sole height of real planted feet (learnt from the training pairs'
+//!   corrected originals, [`sole_height`]) is pitched down about its ankle
+//!   until it reaches it. Why: a VAE sample whose feet point up is tracked
+//!   by the simulation standing on the heel edges of its foot boxes (the
+//!   PD-residual root force keeps it balanced), so the corrected clip's toes
+//!   hang 5-9 cm above the floor while the character stands (grab: 47 % of
+//!   frames "floating"); the heel is not a point of the file's skeleton.
+//! * With `flatten_soles`, a planted foot whose lowest point is higher than
+//!   the sole height of real planted feet (learnt from the training pairs'
+//!   corrected originals, [`sole_height`]) is pitched down about its ankle
+//!   until it reaches it. Why: a VAE sample whose feet point up is tracked
+//!   by the simulation standing on the heel edges of its foot boxes (the
+//!   PD-residual root force keeps it balanced), so the corrected clip's toes
+//!   hang 5-9 cm above the floor while the character stands (grab: 47 % of
+//!   frames "floating"); the heel is not a point of the file's skeleton.
 //!
 //! The root is not touched here: the debiased clip already carries the
 //! corrected clip's root path (see [`crate::features::apply_rotations`]).
@@ -44,6 +60,8 @@ pub struct ContactConfig {
     pub max_speed_m_s: f64,
     /// Ramp of the restoring edit before and after a contact.
     pub blend_s: f64,
+    /// Pitch planted feet down onto the learnt sole height (see the module docs).
+    pub flatten_soles: bool,
 }
 
 impl Default for ContactConfig {
@@ -53,6 +71,7 @@ impl Default for ContactConfig {
             height_band_m: 0.03,
             max_speed_m_s: 0.5,
             blend_s: 0.1,
+            flatten_soles: true,
         }
     }
 }
@@ -85,6 +104,8 @@ pub struct ContactReport {
     pub planted: usize,
     /// Largest ankle distance to the corrected clip's ankle in planted frames after restoring, m.
     pub max_ankle_error_m: f64,
+    /// Planted (foot, frame) pairs pitched down onto the sole height.
+    pub flattened: usize,
 }
 
 /// A leg: its IK chain and the joints of its foot (the ankle and everything below).
@@ -195,6 +216,93 @@ fn weights(contact: &[bool], ramp: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Median height of the lowest foot point over the planted frames of `clips`
+/// (corrected clips in the simulation's floor frame): where real planted
+/// soles are. `None` without legs or planted frames.
+pub fn sole_height(clips: &[&Motion], config: &ContactConfig) -> Option<f64> {
+    let mut heights = Vec::new();
+    for clip in clips {
+        let frames: Vec<Vec<Transform>> = (0..clip.frames())
+            .map(|t| clip.world_transforms(t))
+            .collect();
+        if frames.is_empty() {
+            continue;
+        }
+        for leg in legs(clip, &frames) {
+            let contact = planted(clip, &frames, &leg, config);
+            for (x, c) in frames.iter().zip(contact) {
+                if c {
+                    heights.push(lowest(clip, x, &leg.foot));
+                }
+            }
+        }
+    }
+    if heights.is_empty() {
+        return None;
+    }
+    heights.sort_by(f64::total_cmp);
+    Some(heights[heights.len() / 2])
+}
+
+/// Largest pitch (rad) a foot is turned down by to reach the sole height.
+const MAX_PITCH: f64 = 1.2;
+
+/// The downward pitch about the ankle that puts the foot's lowest point at
+/// `target` (0 when it is already there or lower; at most [`MAX_PITCH`]).
+/// `x` are the frame's world transforms; the pitch axis is horizontal and
+/// across the foot, so a positive angle lowers the toes.
+fn pitch_to(motion: &Motion, x: &[Transform], leg: &Leg, target: f64) -> (DVec3, f64) {
+    let ankle = leg.limb.effector;
+    let a = x[ankle].translation;
+    let skeleton = motion.skeleton();
+    let points: Vec<DVec3> = leg
+        .foot
+        .iter()
+        .flat_map(|&j| {
+            let end = skeleton
+                .joint(j)
+                .end_site
+                .map(|e| x[j].translation + x[j].rotation * e);
+            std::iter::once(x[j].translation).chain(end)
+        })
+        .map(|p| p - a)
+        .collect();
+    let reach = points
+        .iter()
+        .copied()
+        .max_by(|p, q| {
+            let h = |v: &DVec3| DVec3::new(v.x, 0.0, v.z).length();
+            h(p).total_cmp(&h(q))
+        })
+        .unwrap_or(DVec3::ZERO);
+    let forward = DVec3::new(reach.x, 0.0, reach.z);
+    if forward.length() < 1e-6 {
+        return (DVec3::X, 0.0);
+    }
+    let axis = DVec3::Y.cross(forward).normalize();
+    let low = |theta: f64| {
+        let q = DQuat::from_axis_angle(axis, theta);
+        points
+            .iter()
+            .map(|p| a.y + (q * *p).y)
+            .fold(f64::INFINITY, f64::min)
+    };
+    if low(0.0) <= target || low(MAX_PITCH) > target {
+        let theta = if low(0.0) <= target { 0.0 } else { MAX_PITCH };
+        return (axis, theta);
+    }
+    let (mut lo, mut hi) = (0.0, MAX_PITCH);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if low(mid) > target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (axis, hi)
+}
+
 fn world(motion: &Motion, root: DVec3, pose: &[DQuat], out: &mut [Transform]) {
     motion.skeleton().forward(root, pose, out);
 }
@@ -202,10 +310,14 @@ fn world(motion: &Motion, root: DVec3, pose: &[DQuat], out: &mut [Transform]) {
 /// Put the feet of `debiased` back where `corrected` plants them. Both clips
 /// must have the same skeleton layout and frame count (`debiased` is made from
 /// `corrected`); `debiased`'s root path is kept.
+///
+/// `sole_height_m` is where planted soles belong ([`sole_height`]); feet are
+/// only pitched onto it with `config.flatten_soles`.
 pub fn restore(
     debiased: &Motion,
     corrected: &Motion,
     config: &ContactConfig,
+    sole_height_m: Option<f64>,
 ) -> Result<(Motion, ContactReport)> {
     config.validate()?;
     if debiased.joints() != corrected.joints() || debiased.frames() != corrected.frames() {
@@ -274,6 +386,17 @@ pub fn restore(
             pose[ankle] = (x[parent].rotation.inverse() * want).normalize();
             for &j in &leg.foot[1..] {
                 pose[j] = pose[j].slerp(corrected.rotation(t, j), w).normalize();
+            }
+            if let (true, Some(target)) = (config.flatten_soles, sole_height_m) {
+                world(debiased, root, &pose, &mut x);
+                let (axis, theta) = pitch_to(debiased, &x, leg, target);
+                if theta > 0.0 {
+                    let turned = DQuat::from_axis_angle(axis, w * theta) * x[ankle].rotation;
+                    pose[ankle] = (x[parent].rotation.inverse() * turned).normalize();
+                    if contact[t] {
+                        report.flattened += 1;
+                    }
+                }
             }
             if contact[t] {
                 world(debiased, root, &pose, &mut x);
@@ -346,7 +469,7 @@ mod tests {
         let corrected = walk();
         let edited = bent_knees(&corrected, 0.3);
         let (restored, report) =
-            restore(&edited, &corrected, &ContactConfig::default()).expect("restore");
+            restore(&edited, &corrected, &ContactConfig::default(), None).expect("restore");
         assert_eq!(report.legs, 2);
         assert!(report.planted > corrected.frames() / 2, "{report:?}");
         assert!(report.max_ankle_error_m < 2e-3, "{report:?}");
@@ -372,6 +495,77 @@ mod tests {
         }
     }
 
+    /// `m` with both feet pitched toes-up by `angle` (world, about the lateral axis).
+    fn toes_up(m: &Motion, angle: f64) -> Motion {
+        let s = m.skeleton();
+        let nj = m.joints();
+        let mut rot = m.rotations().to_vec();
+        for t in 0..m.frames() {
+            let x = m.world_transforms(t);
+            for ankle in synth::names::feet(s) {
+                let parent = s.parent(ankle).expect("ankle has a parent");
+                let toe = s.children(ankle).next().expect("HDM05 toes");
+                let d = x[toe].translation - x[ankle].translation;
+                let axis = DVec3::Y.cross(DVec3::new(d.x, 0.0, d.z)).normalize();
+                let w = DQuat::from_axis_angle(axis, -angle) * x[ankle].rotation;
+                rot[t * nj + ankle] = (x[parent].rotation.inverse() * w).normalize();
+            }
+        }
+        m.with_frames(m.fps(), m.root_translation().to_vec(), rot)
+            .expect("motion")
+    }
+
+    /// Highest lowest-foot-point of `m` over the frames where `by` plants that foot.
+    fn lowest_planted(m: &Motion, by: &Motion, config: &ContactConfig) -> f64 {
+        let frames: Vec<_> = (0..m.frames()).map(|t| m.world_transforms(t)).collect();
+        let by_frames: Vec<_> = (0..by.frames()).map(|t| by.world_transforms(t)).collect();
+        let mut worst = f64::NEG_INFINITY;
+        for leg in legs(by, &by_frames) {
+            for (x, c) in frames.iter().zip(planted(by, &by_frames, &leg, config)) {
+                if c {
+                    worst = worst.max(lowest(m, x, &leg.foot));
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn flattening_pitches_raised_planted_feet_onto_the_sole_height() {
+        let real = walk();
+        let config = ContactConfig::default();
+        assert!(config.flatten_soles, "on by default");
+        let sole = sole_height(&[&real], &config).expect("planted frames");
+        let raised = toes_up(&real, 0.5);
+        // Toes up by 0.5 rad lifts the planted soles by centimetres.
+        assert!(lowest_planted(&raised, &raised, &config) > sole + 0.03);
+        let (flat, report) = restore(&raised, &raised, &config, Some(sole)).expect("restore");
+        assert!(report.flattened > 0, "{report:?}");
+        let after = lowest_planted(&flat, &raised, &config);
+        assert!(
+            (after - sole).abs() < 0.01,
+            "sole {sole}, planted feet at {after}"
+        );
+        // The ankle stays where it was; without flattening the feet stay raised.
+        assert!(report.max_ankle_error_m < 2e-3, "{report:?}");
+        let off = ContactConfig {
+            flatten_soles: false,
+            ..config
+        };
+        let (same, r) = restore(&raised, &raised, &off, Some(sole)).expect("restore");
+        assert_eq!(r.flattened, 0);
+        let moved = same
+            .rotations()
+            .iter()
+            .zip(raised.rotations())
+            .map(|(a, b)| motion::rotation::angle_between(*a, *b))
+            .fold(0.0, f64::max);
+        assert!(
+            moved < 1e-3,
+            "restoring a clip onto itself turned a joint by {moved} rad"
+        );
+    }
+
     #[test]
     fn restoring_can_be_switched_off_and_checks_its_input() {
         let corrected = walk();
@@ -380,7 +574,7 @@ mod tests {
             restore: false,
             ..ContactConfig::default()
         };
-        let (same, _) = restore(&edited, &corrected, &off).expect("restore");
+        let (same, _) = restore(&edited, &corrected, &off, None).expect("restore");
         assert_eq!(same.rotations(), edited.rotations());
         let short = corrected
             .with_frames(
@@ -390,7 +584,7 @@ mod tests {
             )
             .expect("short");
         assert!(matches!(
-            restore(&edited, &short, &ContactConfig::default()),
+            restore(&edited, &short, &ContactConfig::default(), None),
             Err(DebiasError::Data(_))
         ));
         let bad = ContactConfig {
@@ -398,7 +592,7 @@ mod tests {
             ..ContactConfig::default()
         };
         assert!(matches!(
-            restore(&edited, &corrected, &bad),
+            restore(&edited, &corrected, &bad, None),
             Err(DebiasError::Config(_))
         ));
     }

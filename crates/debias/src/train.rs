@@ -145,6 +145,9 @@ struct Meta {
     fps: f64,
     mlp: MlpConfig,
     contacts: ContactConfig,
+    /// Where the corrected originals' planted soles are (for `flatten_soles`).
+    #[serde(default)]
+    sole_height_m: Option<f64>,
     input: Standardiser,
     output: Standardiser,
     report: TrainReport,
@@ -287,6 +290,10 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         fps,
         mlp: mlp_config,
         contacts: config.contacts,
+        sole_height_m: contacts::sole_height(
+            &pairs.iter().map(|(c, _)| c).collect::<Vec<_>>(),
+            &config.contacts,
+        ),
         input,
         output,
         report: report.clone(),
@@ -338,7 +345,12 @@ impl Debiaser {
         let rotations = rotations_of(&s, self.meta.joints);
         let new: Vec<f32> = rotations.iter().zip(&delta).map(|(a, d)| a + d).collect();
         let debiased = apply_rotations(&corrected, &new)?;
-        contacts::restore(&debiased, &corrected, &self.meta.contacts)
+        contacts::restore(
+            &debiased,
+            &corrected,
+            &self.meta.contacts,
+            self.meta.sole_height_m,
+        )
     }
 
     /// Write `debias.safetensors` and `debias.json` into `dir` (created if missing).

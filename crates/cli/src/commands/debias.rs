@@ -42,6 +42,11 @@ enum What {
         /// (saved with the model; by default they are, see the debias crate).
         #[arg(long)]
         no_contacts: bool,
+        /// Leave planted feet that hang above the floor as the correction left
+        /// them (by default they are pitched down onto the sole height of the
+        /// corrected originals; saved with the model).
+        #[arg(long)]
+        no_flatten_soles: bool,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -68,7 +73,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             hidden,
             seed,
             no_contacts,
-        } => train(&pairs, &clip, &out, iterations, hidden, seed, no_contacts),
+            no_flatten_soles,
+        } => {
+            let contacts = debias::ContactConfig {
+                restore: !no_contacts,
+                flatten_soles: !no_flatten_soles,
+                ..debias::ContactConfig::default()
+            };
+            train(&pairs, &clip, &out, iterations, hidden, seed, contacts)
+        }
         What::Apply {
             model,
             inputs,
@@ -104,7 +117,7 @@ fn train(
     iterations: usize,
     hidden: Vec<usize>,
     seed: u64,
-    no_contacts: bool,
+    contacts: debias::ContactConfig,
 ) -> anyhow::Result<()> {
     let mut loaded = Vec::with_capacity(pairs.len());
     for pair in pairs {
@@ -120,10 +133,7 @@ fn train(
         iterations,
         hidden,
         seed,
-        contacts: debias::ContactConfig {
-            restore: !no_contacts,
-            ..debias::ContactConfig::default()
-        },
+        contacts,
         ..TrainConfig::default()
     };
     let (model, report) = debias::train(&loaded, &config).context("training the debiaser")?;
@@ -156,9 +166,10 @@ fn apply(model: &Path, inputs: &[PathBuf], clip: &ClipArgs, out: &Path) -> anyho
             .with_context(|| format!("debiasing {}", path.display()))?;
         let name = clip_name(path);
         eprintln!(
-            "{name}: {} planted foot frames kept (largest ankle error {:.1} mm)",
+            "{name}: {} planted foot frames kept (largest ankle error {:.1} mm), {} flattened",
             contacts.planted,
-            contacts.max_ankle_error_m * 1e3
+            contacts.max_ankle_error_m * 1e3,
+            contacts.flattened
         );
         write_atomic(
             &out.join(format!("{name}.bvh")),

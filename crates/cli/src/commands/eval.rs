@@ -269,6 +269,27 @@ fn apply_recipe(
     Ok(out)
 }
 
+/// The table's VAE of one class and fold: loaded from `dir` when an earlier
+/// run saved it there (training is deterministic, so this is the same model),
+/// else trained and saved, so a rerun of the table does not train it again.
+fn cached_vae(
+    dir: &Path,
+    train: &[(String, Motion)],
+    iterations: u64,
+    adversarial_weight: Option<f64>,
+) -> anyhow::Result<::vae::TrainedVae> {
+    if dir.join(::vae::trained::META_FILE).is_file() {
+        eprintln!("vae: reusing {}", dir.display());
+        return ::vae::TrainedVae::load(dir)
+            .with_context(|| format!("cannot load the saved VAE {}", dir.display()));
+    }
+    let model = train_vae(train, iterations, adversarial_weight, 0)?;
+    model
+        .save(dir)
+        .with_context(|| format!("cannot save the VAE to {}", dir.display()))?;
+    Ok(model)
+}
+
 fn train_vae(
     train: &[(String, Motion)],
     iterations: u64,
@@ -627,8 +648,8 @@ struct TableArgs {
     sets: Vec<SetKind>,
     #[command(flatten)]
     physics: PhysicsArgs,
-    /// Folder for the corrections (default: OUT/work); a rerun reuses
-    /// finished corrections and resumes interrupted ones.
+    /// Folder for the trained VAEs and the corrections (default: OUT/work); a
+    /// rerun reuses them and resumes interrupted corrections.
     #[arg(long)]
     work: Option<PathBuf>,
 }
@@ -719,9 +740,15 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                     vae_runs.push(("vae_noadv", Some(0.0)));
                 }
             }
+            let work = args
+                .work
+                .clone()
+                .unwrap_or_else(|| args.out.join("work"))
+                .join(format!("{actor}_{class}"));
             for (tag, weight) in vae_runs {
                 let t = Instant::now();
-                let model = train_vae(&split.train, args.vae_iterations, weight, 0)?;
+                let cache = work.join(format!("{tag}-{}it", args.vae_iterations));
+                let model = cached_vae(&cache, &split.train, args.vae_iterations, weight)?;
                 cell.vae_seconds
                     .insert(tag.into(), t.elapsed().as_secs_f64());
                 sets.push((
@@ -739,11 +766,6 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
                     .find(|(n, _)| n == "vae_near")
                     .map(|(_, c)| c.as_slice())
                     .context("no VAE samples to correct")?;
-                let work = args
-                    .work
-                    .clone()
-                    .unwrap_or_else(|| args.out.join("work"))
-                    .join(format!("{actor}_{class}"));
                 let p = eval_physics::correct_and_debias(&args.physics, &split.train, near, &work)?;
                 sets.push(("vae_sub".into(), p.subset));
                 sets.push(("vae_corrected".into(), p.corrected));
