@@ -132,17 +132,25 @@ fn legs(motion: &Motion, frames: &[Vec<Transform>]) -> Vec<Leg> {
         .collect()
 }
 
-/// Height of the lowest point of a foot (its joints and end sites) in one frame.
-fn lowest(motion: &Motion, x: &[Transform], foot: &[usize]) -> f64 {
+/// The points of a foot (its joints and their end sites) in one frame.
+fn foot_points<'a>(
+    motion: &'a Motion,
+    x: &'a [Transform],
+    foot: &'a [usize],
+) -> impl Iterator<Item = DVec3> + 'a {
     let skeleton = motion.skeleton();
-    foot.iter()
-        .flat_map(|&j| {
-            let end = skeleton
-                .joint(j)
-                .end_site
-                .map(|e| x[j].translation + x[j].rotation * e);
-            std::iter::once(x[j].translation).chain(end)
-        })
+    foot.iter().flat_map(move |&j| {
+        let end = skeleton
+            .joint(j)
+            .end_site
+            .map(|e| x[j].translation + x[j].rotation * e);
+        std::iter::once(x[j].translation).chain(end)
+    })
+}
+
+/// Height of the lowest point of a foot in one frame.
+fn lowest(motion: &Motion, x: &[Transform], foot: &[usize]) -> f64 {
+    foot_points(motion, x, foot)
         .map(|p| p.y)
         .fold(f64::INFINITY, f64::min)
 }
@@ -155,6 +163,9 @@ fn planted(
     config: &ContactConfig,
 ) -> Vec<bool> {
     let n = frames.len();
+    if n == 0 {
+        return Vec::new();
+    }
     let heights: Vec<f64> = frames
         .iter()
         .map(|x| lowest(motion, x, &leg.foot))
@@ -254,19 +265,7 @@ const MAX_PITCH: f64 = 1.2;
 fn pitch_to(motion: &Motion, x: &[Transform], leg: &Leg, target: f64) -> (DVec3, f64) {
     let ankle = leg.limb.effector;
     let a = x[ankle].translation;
-    let skeleton = motion.skeleton();
-    let points: Vec<DVec3> = leg
-        .foot
-        .iter()
-        .flat_map(|&j| {
-            let end = skeleton
-                .joint(j)
-                .end_site
-                .map(|e| x[j].translation + x[j].rotation * e);
-            std::iter::once(x[j].translation).chain(end)
-        })
-        .map(|p| p - a)
-        .collect();
+    let points: Vec<DVec3> = foot_points(motion, x, &leg.foot).map(|p| p - a).collect();
     let reach = points
         .iter()
         .copied()

@@ -11,7 +11,9 @@
 //!   output (a correction of the rotations), and back to a clip that keeps the
 //!   corrected root path.
 //! * [`contacts`]: after the network, the corrected clip's planted feet are put
-//!   back with leg IK, so debiasing does not bring back skating and floating.
+//!   back with leg IK, so debiasing does not bring back skating and floating,
+//!   and planted feet hanging above the floor (a sample tracked standing on its
+//!   heels) are pitched onto the sole height learnt from the training pairs.
 //! * [`model`]: the MLP (4 x 512 ReLU in the paper).
 //! * [`train`]: fitting the MLP on pairs; [`Debiaser`] applies, saves and loads it.
 
