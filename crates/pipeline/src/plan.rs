@@ -11,7 +11,8 @@
 //!   `[debias]` is on): the source clip.
 //! * `correct` (one per new clip, except interaction outputs: two partners are
 //!   not simulated together): the job that made the clip, and with warm start
-//!   the correction of the clip it was made from.
+//!   the corrections of the clips it was made from (its source clip; every
+//!   clip of the class for a VAE sample), the best of which warm-starts it.
 //! * `debias_train`: every `correct_original`.
 //! * `debias_apply` (one per corrected clip): its `correct` and `debias_train`.
 
@@ -46,7 +47,12 @@ pub enum JobKind {
     },
     Correct {
         clip: String,
-        source: Option<String>,
+        /// Originals whose corrected policy may warm-start this one (with
+        /// `[correct] warm_start`): the clip a variant was made from, or every
+        /// clip of a VAE sample's class; the runner takes the best corrected
+        /// one ([`crate::stages::best_warm_start`]).
+        #[serde(default)]
+        sources: Vec<String>,
         seed: u64,
     },
     DebiasTrain {
@@ -94,8 +100,9 @@ pub struct Plan {
 struct NewClip {
     name: String,
     producer: String,
-    /// The source clip it was made from (for warm starts), if one.
-    source: Option<String>,
+    /// The clips it was made from (warm-start candidates): one for a
+    /// synthesised variant, the class for a VAE sample, none for interaction.
+    sources: Vec<String>,
     correctable: bool,
 }
 
@@ -166,7 +173,7 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                 new_clips.push(NewClip {
                     name: name.clone(),
                     producer: key.clone(),
-                    source: Some(clip.clone()),
+                    sources: vec![clip.clone()],
                     correctable: true,
                 });
                 jobs.push(PlannedJob {
@@ -200,8 +207,9 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
             new_clips.extend(outputs.iter().map(|name| NewClip {
                 name: name.clone(),
                 producer: key.clone(),
-                // Warm start from the class's first clip: same skeleton and action.
-                source: clips.first().cloned(),
+                // Warm start from the best-corrected clip of the class: same
+                // skeleton and action, and the policy that balances best.
+                sources: clips.clone(),
                 correctable: true,
             }));
             jobs.push(PlannedJob {
@@ -224,7 +232,7 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
             new_clips.extend(outputs.iter().map(|name| NewClip {
                 name: name.clone(),
                 producer: key.clone(),
-                source: None,
+                sources: vec![],
                 correctable: false,
             }));
             jobs.push(PlannedJob {
@@ -263,15 +271,17 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
     for clip in new_clips.iter().filter(|n| n.correctable) {
         let key = format!("correct:{}", clip.name);
         let mut deps = vec![clip.producer.clone()];
-        let source = clip.source.clone().filter(|_| c.warm_start);
-        if let Some(s) = &source {
-            deps.push(format!("correct_original:{s}"));
-        }
+        let sources = if c.warm_start {
+            clip.sources.clone()
+        } else {
+            vec![]
+        };
+        deps.extend(sources.iter().map(|s| format!("correct_original:{s}")));
         jobs.push(PlannedJob {
             key: key.clone(),
             kind: JobKind::Correct {
                 clip: clip.name.clone(),
-                source,
+                sources,
                 seed: job_seed(seed, &key),
             },
             deps,

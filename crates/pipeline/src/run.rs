@@ -91,6 +91,8 @@ struct State<'a> {
     corrections: HashMap<String, CorrectionSummary>,
     /// Accepted corrections of the source clips: the debiaser's training pairs.
     corrected_originals: HashMap<String, Motion>,
+    /// (accepted, R_norm) of every corrected source clip, for warm starts.
+    original_outcomes: HashMap<String, (bool, f64)>,
     debiaser: Option<debias::Debiaser>,
     failed: HashSet<String>,
     summary: Summary,
@@ -127,6 +129,7 @@ pub fn run(recipe: &Recipe, clips: &[Clip], options: &Options) -> Result<Summary
         pending: HashMap::new(),
         corrections: HashMap::new(),
         corrected_originals: HashMap::new(),
+        original_outcomes: HashMap::new(),
         debiaser: None,
         failed: HashSet::new(),
         summary: Summary {
@@ -273,6 +276,10 @@ impl<'a> State<'a> {
                 let outcome = stages::correct(step, clip, &src.motion, *seed, &dir, None, |p| {
                     on_event(Event::Correction { job, progress: p })
                 })?;
+                self.original_outcomes.insert(
+                    clip.clone(),
+                    (outcome.report.accepted, outcome.report.r_norm),
+                );
                 // Only an accepted correction is a fair example of what the
                 // simulation does to a clip: a fall teaches the debiaser nonsense.
                 if outcome.report.accepted {
@@ -281,16 +288,28 @@ impl<'a> State<'a> {
                 }
                 Ok(())
             }
-            JobKind::Correct { clip, source, seed } => {
+            JobKind::Correct {
+                clip,
+                sources,
+                seed,
+            } => {
                 let step = recipe.correct.as_ref().ok_or_else(|| missing("correct"))?;
                 let made = self
                     .pending
                     .remove(clip)
                     .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not made")))?;
                 let dir = self.correct_dir(clip);
-                let warm = source
-                    .as_ref()
-                    .map(|s| self.original_dir(s).join("checkpoints"));
+                let outcomes = sources
+                    .iter()
+                    .map(|s| {
+                        self.original_outcomes
+                            .get(s)
+                            .copied()
+                            .ok_or_else(|| PipelineError::Job(format!("`{s}` was not corrected")))
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                let warm = stages::best_warm_start(&outcomes)
+                    .map(|i| self.original_dir(&sources[i]).join("checkpoints"));
                 let on_event = self.options.on_event;
                 let outcome = stages::correct(
                     step,

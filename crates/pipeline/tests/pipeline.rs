@@ -163,6 +163,16 @@ fn the_plan_orders_jobs_after_their_inputs() {
         c.deps
             .contains(&"correct_original:HDM_bd_kickLFront1Reps_001_120".to_string())
     );
+    // A VAE sample may start from any clip of its class: the best corrected one.
+    let v = &plan.jobs[position("correct:kickLFront1Reps__vae_000")];
+    let JobKind::Correct { sources, .. } = &v.kind else {
+        panic!("{v:?}")
+    };
+    let kicks: Vec<&String> = names.iter().filter(|n| n.contains("kick")).collect();
+    assert_eq!(sources.iter().collect::<Vec<_>>(), kicks);
+    for k in kicks {
+        assert!(v.deps.contains(&format!("correct_original:{k}")), "{v:?}");
+    }
     let train = &plan.jobs[position("debias_train")];
     assert_eq!(train.deps.len(), names.len());
     let apply = &plan.jobs[position("debias_apply:kickLFront1Reps__vae_001")];

@@ -214,12 +214,16 @@ impl Job<'_> {
                 .ok_or_else(|| permanent("the correction left no checkpoint"))?;
                 let corrected = pipeline::encode_clip(&outcome.motion, None)
                     .map_err(|e| permanent(e.to_string()))?;
+                // The report lets a VAE sample's correction pick the best original.
+                let report = serde_json::to_vec(&outcome.report)
+                    .map_err(|e| permanent(format!("report.json: {e}")))?;
                 let files = vec![
                     (format!("work/originals/{clip}/corrected.npz"), corrected),
                     (
                         format!("work/originals/{clip}/checkpoints.zip"),
                         checkpoints,
                     ),
+                    (format!("work/originals/{clip}/report.json"), report),
                 ];
                 let mut output = JobOutput::default();
                 for (name, bytes) in files {
@@ -232,10 +236,14 @@ impl Job<'_> {
                 }
                 Ok(output)
             }
-            JobKind::Correct { clip, source, seed } => {
+            JobKind::Correct {
+                clip,
+                sources,
+                seed,
+            } => {
                 let step = recipe.correct.clone().ok_or_else(|| missing("correct"))?;
                 let (motion, mask, mut entry) = self.work_clip(&clip).await?;
-                let warm = match &source {
+                let warm = match self.warm_start_source(&sources).await? {
                     Some(s) => {
                         let key = format!("correct_original:{s}");
                         let file = self.dep_work_file(&key, "checkpoints.zip")?;
@@ -411,6 +419,24 @@ impl Job<'_> {
             .ok_or_else(|| permanent(format!("the claim lacks the output of `{key}`")))?;
         serde_json::from_value(dep.output.clone())
             .map_err(|e| permanent(format!("the output of `{key}` is unreadable: {e}")))
+    }
+
+    /// The corrected original whose policy warm-starts a correction
+    /// ([`pipeline::stages::best_warm_start`] over the candidates' reports).
+    async fn warm_start_source<'s>(&self, sources: &'s [String]) -> Result<Option<&'s str>, Halt> {
+        let mut outcomes = Vec::with_capacity(sources.len());
+        for s in sources {
+            let key = format!("correct_original:{s}");
+            let accepted = !self.dep(&key)?.rejected.contains(s);
+            let file = self.dep_work_file(&key, "report.json")?;
+            let report: serde_json::Value = serde_json::from_slice(&self.input_file(&file).await?)
+                .map_err(|e| permanent(format!("{file}: {e}")))?;
+            let r_norm = report["r_norm"]
+                .as_f64()
+                .ok_or_else(|| permanent(format!("{file} has no r_norm")))?;
+            outcomes.push((accepted, r_norm));
+        }
+        Ok(pipeline::stages::best_warm_start(&outcomes).map(|i| sources[i].as_str()))
     }
 
     /// The `work` file of input `key` whose name ends with `suffix`.

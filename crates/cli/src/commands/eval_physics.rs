@@ -89,21 +89,6 @@ fn config(args: &PhysicsArgs, seed: u64) -> correct::CorrectConfig {
     c
 }
 
-/// The original whose policy the samples start from: the accepted correction
-/// with the highest R_norm, else (none accepted) the highest R_norm. A VAE sample
-/// has no single source clip; the best-tracked clip of its class is the policy
-/// that balances best. (Session 3 started every sample from the first original,
-/// whose own correction was rejected on jog and deposit.)
-/// `outcomes` are (accepted, R_norm) per original; ties go to the first.
-pub fn warm_start_source(outcomes: &[(bool, f64)]) -> usize {
-    (0..outcomes.len())
-        .max_by(|&a, &b| {
-            let (ka, kb) = (outcomes[a], outcomes[b]);
-            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1)).then(b.cmp(&a))
-        })
-        .unwrap_or(0)
-}
-
 /// Corrects `samples` (a subset of them, see [`PhysicsArgs`]) and the training
 /// clips in `work`, then debiases; finished corrections in `work` are reused.
 pub fn correct_and_debias(
@@ -166,7 +151,10 @@ pub fn correct_and_debias(
             pairs.push((o.motion, m.clone()));
         }
     }
-    let best = warm_start_source(&reports);
+    // The samples start from the best corrected original's policy (a VAE
+    // sample has no single source clip; session 3 used the first original,
+    // whose own correction was rejected on jog and deposit).
+    let best = pipeline::stages::best_warm_start(&reports).unwrap_or(0);
     eprintln!(
         "warm start: samples start from the policy of {} (R_norm {:.3}, {})",
         originals[best].0,
@@ -244,18 +232,7 @@ pub fn correct_and_debias(
 
 #[cfg(test)]
 mod tests {
-    use super::{spread, warm_start_source};
-
-    #[test]
-    fn warm_start_prefers_the_best_accepted_original() {
-        // Accepted beats a higher R_norm that was rejected.
-        let o = [(false, 0.9), (true, 0.7), (true, 0.8), (false, 0.95)];
-        assert_eq!(warm_start_source(&o), 2);
-        // None accepted: the best R_norm; ties go to the first.
-        assert_eq!(warm_start_source(&[(false, 0.5), (false, 0.6)]), 1);
-        assert_eq!(warm_start_source(&[(true, 0.8), (true, 0.8)]), 0);
-        assert_eq!(warm_start_source(&[]), 0);
-    }
+    use super::spread;
 
     #[test]
     fn spread_takes_evenly_spaced_items() {
