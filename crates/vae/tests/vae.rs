@@ -214,7 +214,8 @@ fn near_samples_are_closer_to_training_posteriors_than_prior_samples() {
 
 #[test]
 fn real_clip_features_round_trip_to_the_same_poses() {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/hdm05");
+    // The bundled copy of the HDM05 kick (also in ../shared/data/hdm05).
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
     let options = motion::LoadOptions {
         skeleton: Some(dir.join("HDM_bd.asf")),
         ..Default::default()
