@@ -28,14 +28,6 @@
 //!   PD-residual root force keeps it balanced), so the corrected clip's toes
 //!   hang 5-9 cm above the floor while the character stands (grab: 47 % of
 //!   frames "floating"); the heel is not a point of the file's skeleton.
-//! * With `flatten_soles`, a planted foot whose lowest point is higher than
-//!   the sole height of real planted feet (learnt from the training pairs'
-//!   corrected originals, [`sole_height`]) is pitched down about its ankle
-//!   until it reaches it. Why: a VAE sample whose feet point up is tracked
-//!   by the simulation standing on the heel edges of its foot boxes (the
-//!   PD-residual root force keeps it balanced), so the corrected clip's toes
-//!   hang 5-9 cm above the floor while the character stands (grab: 47 % of
-//!   frames "floating"); the heel is not a point of the file's skeleton.
 //!
 //! The root is not touched here: the debiased clip already carries the
 //! corrected clip's root path (see [`crate::features::apply_rotations`]).
@@ -286,9 +278,11 @@ fn pitch_to(motion: &Motion, x: &[Transform], leg: &Leg, target: f64) -> (DVec3,
             .map(|p| a.y + (q * *p).y)
             .fold(f64::INFINITY, f64::min)
     };
-    if low(0.0) <= target || low(MAX_PITCH) > target {
-        let theta = if low(0.0) <= target { 0.0 } else { MAX_PITCH };
-        return (axis, theta);
+    if low(0.0) <= target {
+        return (axis, 0.0);
+    }
+    if low(MAX_PITCH) > target {
+        return (axis, MAX_PITCH);
     }
     let (mut lo, mut hi) = (0.0, MAX_PITCH);
     for _ in 0..40 {

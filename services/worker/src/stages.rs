@@ -426,14 +426,14 @@ impl Job<'_> {
     async fn warm_start_source<'s>(&self, sources: &'s [String]) -> Result<Option<&'s str>, Halt> {
         let mut outcomes = Vec::with_capacity(sources.len());
         for s in sources {
-            let key = format!("correct_original:{s}");
-            let accepted = !self.dep(&key)?.rejected.contains(s);
-            let file = self.dep_work_file(&key, "report.json")?;
+            let file = self.dep_work_file(&format!("correct_original:{s}"), "report.json")?;
             let report: serde_json::Value = serde_json::from_slice(&self.input_file(&file).await?)
                 .map_err(|e| permanent(format!("{file}: {e}")))?;
-            let r_norm = report["r_norm"]
-                .as_f64()
-                .ok_or_else(|| permanent(format!("{file} has no r_norm")))?;
+            let (Some(accepted), Some(r_norm)) =
+                (report["accepted"].as_bool(), report["r_norm"].as_f64())
+            else {
+                return Err(permanent(format!("{file} lacks accepted / r_norm")));
+            };
             outcomes.push((accepted, r_norm));
         }
         Ok(pipeline::stages::best_warm_start(&outcomes).map(|i| sources[i].as_str()))
