@@ -119,9 +119,16 @@ fn unknown_extension(path: &Path) -> MotionError {
 /// Save a clip as `.bvh` (in [`bvh::default_unit`]) or `.npz` by extension.
 pub fn save(motion: &Motion, path: impl AsRef<Path>) -> Result<(), MotionError> {
     let path = path.as_ref();
+    // Written whole or not at all: a crash never leaves half a clip behind.
     match Format::of(path) {
-        Some(Format::Bvh) => bvh::write_file(motion, path),
-        Some(Format::Npz) => npz::write_motion(motion, &[], path),
+        Some(Format::Bvh) => write_atomic(path, &bvh::to_bytes(motion)),
+        Some(Format::Npz) => {
+            let bytes = npz::motion_to_bytes(motion, &[]).map_err(|source| MotionError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            write_atomic(path, &bytes)
+        }
         _ => Err(MotionError::Unsupported(format!(
             "{}: can only save .bvh or .npz",
             path.display()

@@ -1,10 +1,12 @@
 //! The whole augmentation: a recipe ([`recipe`]) becomes a graph of per-clip
-//! jobs ([`plan`]); each job kind is one function ([`stages`]); [`run`] walks
-//! the graph in one process (the CLI, evaluation), while the service stores
-//! the same graph in Postgres and hands its jobs to workers that call the same
-//! stage functions.
+//! jobs that carry their settings ([`plan`]); one executor runs any of them
+//! ([`exec`], the science of each kind in [`stages`]); [`run`] walks the graph
+//! in one process (the CLI, evaluation), while the service stores the same
+//! graph in Postgres and hands its jobs to workers that call the same
+//! executor over HTTP inputs.
 
 pub mod codec;
+pub mod exec;
 pub mod manifest;
 pub mod plan;
 pub mod recipe;
@@ -12,10 +14,11 @@ pub mod run;
 pub mod stages;
 
 pub use codec::{decode_clip, encode_clip};
+pub use exec::{Context, Inputs, Made, Outputs, WorkClip, execute};
 pub use manifest::{CorrectionSummary, ManifestEntry};
-pub use plan::{JobKind, Plan, PlannedJob, plan};
+pub use plan::{JobKind, Plan, PlannedJob, corrections, plan};
 pub use recipe::{CorrectStep, InteractionStep, Recipe, ResidualKind, VaeStep};
-pub use run::{Clip, Event, Options, Output, Summary, run};
+pub use run::{Clip, Event, Options, Output, Summary, Tune, run, run_plan};
 
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -47,4 +50,10 @@ pub enum PipelineError {
     Debias(#[from] debias::DebiasError),
     #[error("{0}")]
     Job(String),
+    /// Stopped on request (cancellation, shutdown) before the end.
+    #[error("stopped before the end")]
+    Stopped,
+    /// An input could not be fetched now; trying again later may work.
+    #[error("{0}")]
+    Unavailable(String),
 }

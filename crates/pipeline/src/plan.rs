@@ -3,8 +3,13 @@
 //! coordinator (which stores it in Postgres and hands jobs to workers) run the
 //! same graph with the same names and seeds.
 //!
+//! Every job carries the settings it runs with, resolved here once (the
+//! recipe's defaults filled in at planning, not when the job runs), so a
+//! stored plan runs as it was planned and the executor ([`crate::exec`])
+//! needs nothing but the job and its inputs.
+//!
 //! Jobs and what they need:
-//! * `synthesize` (one per clip, op and copy): the source clip.
+//! * `synthesize` (one per clip: every kinematic output of it): the source clip.
 //! * `vae` (one per class): the class's clips; trains, then samples `copies` clips.
 //! * `interaction` (one per pair `<stem>_A` / `<stem>_B`): both clips.
 //! * `correct_original` (one per source clip, when `[correct]` warm-starts or
@@ -20,43 +25,54 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::recipe::{GroupBy, Recipe};
+use crate::recipe::{CorrectStep, GroupBy, InteractionStep, Recipe, VaeStep};
 
-/// What one job does.
+/// What one job does, with the settings it runs with.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum JobKind {
+    /// Every kinematic output of one clip (milliseconds each).
     Synthesize {
         clip: String,
-        job: synth::Job,
+        /// The recipe's `[[ops]]`.
+        ops: synth::Recipe,
+        /// One entry per output, in output order.
+        outputs: Vec<synth::Job>,
     },
     Vae {
         group: String,
         clips: Vec<String>,
         seed: u64,
+        step: VaeStep,
+        /// The manifest's op index of the VAE's outputs (after the `[[ops]]`).
+        op_index: usize,
     },
     Interaction {
         pair: String,
         a: String,
         b: String,
         seed: u64,
+        step: InteractionStep,
+        op_index: usize,
     },
     CorrectOriginal {
         clip: String,
         seed: u64,
+        step: CorrectStep,
     },
     Correct {
         clip: String,
         /// Originals whose corrected policy may warm-start this one (with
         /// `[correct] warm_start`): the clip a variant was made from, or every
-        /// clip of a VAE sample's class; the runner takes the best corrected
+        /// clip of a VAE sample's class; the executor takes the best corrected
         /// one ([`crate::stages::best_warm_start`]).
-        #[serde(default)]
         sources: Vec<String>,
         seed: u64,
+        step: CorrectStep,
     },
     DebiasTrain {
         originals: Vec<String>,
+        config: debias::TrainConfig,
     },
     DebiasApply {
         clip: String,
@@ -75,6 +91,33 @@ impl JobKind {
             JobKind::DebiasApply { .. } => "debias_apply",
         }
     }
+
+    /// The source clips of the dataset the job reads.
+    pub fn sources(&self) -> Vec<&str> {
+        match self {
+            JobKind::Synthesize { clip, .. } | JobKind::CorrectOriginal { clip, .. } => {
+                vec![clip]
+            }
+            JobKind::Vae { clips, .. } => clips.iter().map(String::as_str).collect(),
+            JobKind::Interaction { a, b, .. } => vec![a, b],
+            JobKind::DebiasTrain { originals, .. } => {
+                originals.iter().map(String::as_str).collect()
+            }
+            JobKind::Correct { .. } | JobKind::DebiasApply { .. } => vec![],
+        }
+    }
+
+    /// The clip the job is about, when there is one (for error listings).
+    pub fn clip(&self) -> Option<&str> {
+        match self {
+            JobKind::Synthesize { clip, .. }
+            | JobKind::CorrectOriginal { clip, .. }
+            | JobKind::Correct { clip, .. }
+            | JobKind::DebiasApply { clip } => Some(clip),
+            JobKind::Interaction { a, .. } => Some(a),
+            JobKind::Vae { .. } | JobKind::DebiasTrain { .. } => None,
+        }
+    }
 }
 
 /// One job of the graph.
@@ -87,6 +130,10 @@ pub struct PlannedJob {
     pub deps: Vec<String>,
     /// Clips this job makes (a new clip, or a new version of one).
     pub outputs: Vec<String>,
+    /// Whether its outputs are final here (no later job works on them):
+    /// written as `<name>.bvh` / `.npz` with their manifest entries, else kept
+    /// losslessly for the next job.
+    pub finishes: bool,
 }
 
 /// Every job, in an order where each job comes after its dependencies.
@@ -163,29 +210,37 @@ pub fn interaction_outputs(stem: &str, copies: u32) -> Vec<String> {
 pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
     let mut jobs = Vec::new();
     let mut new_clips = Vec::new();
+    // Manifest op indices: the `[[ops]]`, then `[vae]`, then `[interaction]`.
+    let vae_op_index = recipe.synth.as_ref().map_or(0, |s| s.ops.len());
 
     if let Some(s) = &recipe.synth {
         for clip in names {
-            for job in s.jobs(clip, seed) {
-                let op = s.ops[job.op_index].op.kind();
-                let name = format!("{clip}__{:02}_{op}_{:03}", job.op_index, job.copy);
-                let key = format!("synthesize:{name}");
-                new_clips.push(NewClip {
-                    name: name.clone(),
-                    producer: key.clone(),
-                    sources: vec![clip.clone()],
-                    correctable: true,
-                });
-                jobs.push(PlannedJob {
-                    key,
-                    kind: JobKind::Synthesize {
-                        clip: clip.clone(),
-                        job,
-                    },
-                    deps: vec![],
-                    outputs: vec![name],
-                });
-            }
+            let outputs = s.jobs(clip, seed);
+            let key = format!("synthesize:{clip}");
+            let made: Vec<String> = outputs
+                .iter()
+                .map(|job| {
+                    let op = s.ops[job.op_index].op.kind();
+                    format!("{clip}__{:02}_{op}_{:03}", job.op_index, job.copy)
+                })
+                .collect();
+            new_clips.extend(made.iter().map(|name| NewClip {
+                name: name.clone(),
+                producer: key.clone(),
+                sources: vec![clip.clone()],
+                correctable: true,
+            }));
+            jobs.push(PlannedJob {
+                key,
+                kind: JobKind::Synthesize {
+                    clip: clip.clone(),
+                    ops: s.clone(),
+                    outputs,
+                },
+                deps: vec![],
+                outputs: made,
+                finishes: false,
+            });
         }
     }
 
@@ -218,9 +273,12 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                     group: group.clone(),
                     clips,
                     seed: job_seed(seed, &key),
+                    step: v.clone(),
+                    op_index: vae_op_index,
                 },
                 deps: vec![],
                 outputs,
+                finishes: false,
             });
         }
     }
@@ -242,15 +300,18 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                     a,
                     b,
                     seed: job_seed(seed, &key),
+                    step: i.clone(),
+                    op_index: vae_op_index + 1,
                 },
                 deps: vec![],
                 outputs,
+                finishes: false,
             });
         }
     }
 
     let Some(c) = &recipe.correct else {
-        return Plan { jobs };
+        return Plan::finished(jobs);
     };
     let originals_needed = c.warm_start || recipe.debias.is_some();
     if originals_needed {
@@ -261,9 +322,11 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                 kind: JobKind::CorrectOriginal {
                     clip: clip.clone(),
                     seed: job_seed(seed, &key),
+                    step: c.clone(),
                 },
                 deps: vec![],
                 outputs: vec![],
+                finishes: false,
             });
         }
     }
@@ -283,24 +346,28 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                 clip: clip.name.clone(),
                 sources,
                 seed: job_seed(seed, &key),
+                step: c.clone(),
             },
             deps,
             outputs: vec![clip.name.clone()],
+            finishes: false,
         });
         corrected.push((clip.name.clone(), key));
     }
-    if recipe.debias.is_some() && !names.is_empty() {
+    if let Some(config) = recipe.debias.as_ref().filter(|_| !names.is_empty()) {
         let train_key = "debias_train".to_string();
         jobs.push(PlannedJob {
             key: train_key.clone(),
             kind: JobKind::DebiasTrain {
                 originals: names.to_vec(),
+                config: config.clone(),
             },
             deps: names
                 .iter()
                 .map(|n| format!("correct_original:{n}"))
                 .collect(),
             outputs: vec![],
+            finishes: false,
         });
         for (name, correct_key) in corrected {
             jobs.push(PlannedJob {
@@ -308,8 +375,92 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                 kind: JobKind::DebiasApply { clip: name.clone() },
                 deps: vec![correct_key, train_key.clone()],
                 outputs: vec![name],
+                finishes: false,
             });
         }
     }
-    Plan { jobs }
+    Plan::finished(jobs)
+}
+
+impl Plan {
+    /// The plan of `jobs` (in dependency order), each job told whether its
+    /// outputs are final: no later job makes a new version of them.
+    fn finished(mut jobs: Vec<PlannedJob>) -> Plan {
+        let mut later: std::collections::HashSet<String> = std::collections::HashSet::new();
+        for job in jobs.iter_mut().rev() {
+            job.finishes = job.outputs.iter().all(|o| !later.contains(o));
+            later.extend(job.outputs.iter().cloned());
+        }
+        Plan { jobs }
+    }
+
+    /// The job with key `key`.
+    pub fn job(&self, key: &str) -> Option<&PlannedJob> {
+        self.jobs.iter().find(|j| j.key == key)
+    }
+}
+
+/// The correction part of a plan for clips made elsewhere (the evaluation
+/// table's VAE samples): correct every clip of `originals`, then each clip of
+/// `clips` warm-started from the best corrected original, then with `debias`
+/// train the debiasing network on the accepted originals and apply it to the
+/// accepted corrected clips. `seed_of` gives each correction's seed.
+pub fn corrections(
+    originals: &[String],
+    clips: &[String],
+    step: &CorrectStep,
+    debias: Option<&debias::TrainConfig>,
+    seed_of: impl Fn(&str) -> u64,
+) -> Plan {
+    let mut jobs: Vec<PlannedJob> = originals
+        .iter()
+        .map(|clip| PlannedJob {
+            key: format!("correct_original:{clip}"),
+            kind: JobKind::CorrectOriginal {
+                clip: clip.clone(),
+                seed: seed_of(clip),
+                step: step.clone(),
+            },
+            deps: vec![],
+            outputs: vec![],
+            finishes: false,
+        })
+        .collect();
+    let original_keys: Vec<String> = jobs.iter().map(|j| j.key.clone()).collect();
+    for clip in clips {
+        jobs.push(PlannedJob {
+            key: format!("correct:{clip}"),
+            kind: JobKind::Correct {
+                clip: clip.clone(),
+                sources: originals.to_vec(),
+                seed: seed_of(clip),
+                step: step.clone(),
+            },
+            deps: original_keys.clone(),
+            outputs: vec![clip.clone()],
+            finishes: false,
+        });
+    }
+    if let Some(config) = debias {
+        jobs.push(PlannedJob {
+            key: "debias_train".into(),
+            kind: JobKind::DebiasTrain {
+                originals: originals.to_vec(),
+                config: config.clone(),
+            },
+            deps: original_keys,
+            outputs: vec![],
+            finishes: false,
+        });
+        for clip in clips {
+            jobs.push(PlannedJob {
+                key: format!("debias_apply:{clip}"),
+                kind: JobKind::DebiasApply { clip: clip.clone() },
+                deps: vec![format!("correct:{clip}"), "debias_train".into()],
+                outputs: vec![clip.clone()],
+                finishes: false,
+            });
+        }
+    }
+    Plan::finished(jobs)
 }

@@ -103,6 +103,20 @@ impl Default for InteractionStep {
     }
 }
 
+impl InteractionStep {
+    /// The variations of one pair, drawn with `seed`.
+    pub fn spec(&self, seed: u64) -> interaction::VariationSpec {
+        interaction::VariationSpec {
+            count: self.copies as usize,
+            scale_min: self.scale_min,
+            scale_max: self.scale_max,
+            bone_jitter: self.bone_jitter,
+            grid: self.grid,
+            seed,
+        }
+    }
+}
+
 /// `[correct]`: physical correction of every new clip.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -370,16 +384,7 @@ impl Recipe {
 
     /// The interaction variations of one pair, drawn with `seed`.
     pub fn interaction_spec(&self, seed: u64) -> Option<interaction::VariationSpec> {
-        self.interaction
-            .as_ref()
-            .map(|i| interaction::VariationSpec {
-                count: i.copies as usize,
-                scale_min: i.scale_min,
-                scale_max: i.scale_max,
-                bone_jitter: i.bone_jitter,
-                grid: i.grid,
-                seed,
-            })
+        self.interaction.as_ref().map(|i| i.spec(seed))
     }
 
     /// The recipe as the JSON object it was read from (with defaults filled in).

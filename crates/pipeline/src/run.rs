@@ -1,20 +1,22 @@
-//! The whole augmentation in one process: walk the plan in order, keep every
-//! clip in memory between its stages, and write each output once its last
-//! stage is done. Expensive work survives a crash: every correction lives in
-//! `work/correct/<clip>/` (checkpoints, then the finished clip and report),
-//! and a rerun with the same recipe and inputs reuses or resumes it.
+//! The whole augmentation in one process: walk the plan in order, run each
+//! job with the one executor ([`crate::exec`]) over inputs kept in memory,
+//! and write each output once its last job is done. Expensive work survives
+//! a crash: every correction lives in `work/correct/<clip>/` (checkpoints,
+//! then the finished clip and report), and a rerun with the same recipe and
+//! inputs reuses or resumes it.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use motion::Motion;
 use rayon::prelude::*;
 
 use crate::PipelineError;
-use crate::manifest::{CorrectionSummary, ManifestEntry};
+use crate::exec::{self, Context, Inputs, Made, WorkClip};
+use crate::manifest::ManifestEntry;
 use crate::plan::{JobKind, Plan, PlannedJob, plan};
 use crate::recipe::Recipe;
-use crate::stages::{self, NewClip};
 
 /// A source clip.
 #[derive(Debug, Clone)]
@@ -81,27 +83,44 @@ pub struct Summary {
     pub jobs: usize,
 }
 
+/// The run's memory: source clips, clips between their jobs, what the
+/// corrections of the originals and the debiasing made. It is the
+/// [`Inputs`] of every job.
 struct State<'a> {
-    recipe: &'a Recipe,
     options: &'a Options<'a>,
+    tune: Option<&'a Tune>,
     sources: HashMap<String, &'a Clip>,
-    /// Clips between stages.
-    pending: HashMap<String, NewClip>,
-    /// Correction summaries of corrected outputs awaiting debiasing.
-    corrections: HashMap<String, CorrectionSummary>,
-    /// Accepted corrections of the source clips: the debiaser's training pairs.
-    corrected_originals: HashMap<String, Motion>,
-    /// (accepted, R_norm) of every corrected source clip, for warm starts.
-    original_outcomes: HashMap<String, (bool, f64)>,
-    debiaser: Option<debias::Debiaser>,
+    /// Clips between jobs.
+    pending: HashMap<String, WorkClip>,
+    /// Clips whose correction was rejected (left out).
+    rejected: HashSet<String>,
+    /// Corrections of the source clips (warm starts, debiasing pairs).
+    originals: HashMap<String, correct::Outcome>,
+    debiaser: Option<Arc<debias::Debiaser>>,
     failed: HashSet<String>,
     summary: Summary,
-    /// Output name -> key of its last job (it is written after that one).
-    last_job: HashMap<String, String>,
 }
 
 /// Run `recipe` on `clips`.
 pub fn run(recipe: &Recipe, clips: &[Clip], options: &Options) -> Result<Summary, PipelineError> {
+    let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
+    let plan = plan(recipe, &names, options.seed);
+    run_plan(&plan, clips, Vec::new(), options, None)
+}
+
+/// Changes to every correction's settings (see [`exec::Context::tune_correction`]).
+pub type Tune = dyn Fn(&mut correct::CorrectConfig) + Sync;
+
+/// Run `plan` on source clips `clips`, with `made` the clips its first jobs
+/// work on that no job of it makes (e.g. samples of a VAE trained elsewhere,
+/// for a plan of [`crate::plan::corrections`]).
+pub fn run_plan(
+    plan: &Plan,
+    clips: &[Clip],
+    made: Vec<WorkClip>,
+    options: &Options,
+    tune: Option<&Tune>,
+) -> Result<Summary, PipelineError> {
     let mut names = HashSet::new();
     for c in clips {
         if !names.insert(c.name.as_str()) {
@@ -111,34 +130,24 @@ pub fn run(recipe: &Recipe, clips: &[Clip], options: &Options) -> Result<Summary
             )));
         }
     }
-    let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
-    let plan = plan(recipe, &names, options.seed);
     (options.on_event)(Event::Planned {
         jobs: plan.jobs.len(),
     });
-    let mut last_job = HashMap::new();
-    for job in &plan.jobs {
-        for o in &job.outputs {
-            last_job.insert(o.clone(), job.key.clone());
-        }
-    }
     let mut state = State {
-        recipe,
         options,
+        tune,
         sources: clips.iter().map(|c| (c.name.clone(), c)).collect(),
-        pending: HashMap::new(),
-        corrections: HashMap::new(),
-        corrected_originals: HashMap::new(),
-        original_outcomes: HashMap::new(),
+        pending: made.into_iter().map(|c| (c.name.clone(), c)).collect(),
+        rejected: HashSet::new(),
+        originals: HashMap::new(),
         debiaser: None,
         failed: HashSet::new(),
         summary: Summary {
             jobs: plan.jobs.len(),
             ..Summary::default()
         },
-        last_job,
     };
-    state.run_plan(&plan)?;
+    state.run_plan(plan)?;
     let mut summary = state.summary;
     crate::manifest::sort(&mut summary.manifest);
     summary.outputs.sort_by_key(|o| {
@@ -191,36 +200,22 @@ impl<'a> State<'a> {
         self.summary.failures.push((job.key.clone(), reason));
     }
 
-    fn source(&self, name: &str) -> Result<&'a Clip, PipelineError> {
-        self.sources
-            .get(name)
-            .copied()
-            .ok_or_else(|| PipelineError::Job(format!("no clip named `{name}`")))
-    }
-
     fn synthesize_batch(&mut self, jobs: &[PlannedJob]) -> Result<(), PipelineError> {
-        let recipe = self.recipe;
         let on_event = self.options.on_event;
-        let sources = &self.sources;
-        let results: Vec<Result<NewClip, PipelineError>> = jobs
+        let state = &*self;
+        let results: Vec<(Vec<Made>, Result<(), PipelineError>)> = jobs
             .par_iter()
             .map(|job| {
                 on_event(Event::JobStarted { job });
-                let JobKind::Synthesize { clip, job: sj } = &job.kind else {
-                    return Err(PipelineError::Job("not a synthesis job".into()));
-                };
-                let src = sources
-                    .get(clip)
-                    .ok_or_else(|| PipelineError::Job(format!("no clip named `{clip}`")))?;
-                let r = stages::synthesize(recipe, clip, &src.source, &src.motion, *sj);
+                let (made, r) = state.execute(job);
                 on_event(Event::JobFinished { job, ok: r.is_ok() });
-                r
+                (made, r)
             })
             .collect();
-        for (job, result) in jobs.iter().zip(results) {
-            match result {
-                Ok(clip) => self.made(job, vec![clip])?,
-                Err(e) => self.fail(job, e.to_string()),
+        for (job, (made, result)) in jobs.iter().zip(results) {
+            self.keep(job, made)?;
+            if let Err(e) = result {
+                self.fail(job, e.to_string());
             }
         }
         Ok(())
@@ -231,245 +226,174 @@ impl<'a> State<'a> {
             return Ok(());
         }
         (self.options.on_event)(Event::JobStarted { job });
-        let span = tracing::info_span!("pipeline_job", key = job.key, kind = job.kind.name());
-        let _guard = span.enter();
-        let result = self.execute(job);
+        let (made, result) = self.execute(job);
         let ok = result.is_ok();
-        if let Err(e) = result {
+        match result {
+            Ok(()) => self.keep(job, made)?,
             // A broken output directory is fatal; a job's own failure is not.
-            if let PipelineError::Io { .. } = e {
-                return Err(e);
-            }
-            self.fail(job, e.to_string());
+            Err(e @ PipelineError::Io { .. }) => return Err(e),
+            Err(e) => self.fail(job, e.to_string()),
         }
         (self.options.on_event)(Event::JobFinished { job, ok });
         Ok(())
     }
 
-    fn execute(&mut self, job: &PlannedJob) -> Result<(), PipelineError> {
-        let recipe = self.recipe;
-        match &job.kind {
-            JobKind::Synthesize { .. } => self.synthesize_batch(std::slice::from_ref(job)),
-            JobKind::Vae { group, clips, seed } => {
-                let step = recipe.vae.as_ref().ok_or_else(|| missing("vae"))?;
-                let clips = clips
-                    .iter()
-                    .map(|n| Ok((n.clone(), self.source(n)?.motion.clone())))
-                    .collect::<Result<Vec<_>, PipelineError>>()?;
-                let made = stages::vae(recipe, step, group, &clips, *seed)?;
-                self.made(job, made)
-            }
-            JobKind::Interaction { pair, a, b, seed } => {
-                let step = recipe
-                    .interaction
-                    .as_ref()
-                    .ok_or_else(|| missing("interaction"))?;
-                let (a, b) = (&self.source(a)?.motion, &self.source(b)?.motion);
-                let made = stages::interaction(recipe, step, pair, a, b, *seed)?;
-                self.made(job, made)
-            }
-            JobKind::CorrectOriginal { clip, seed } => {
-                let step = recipe.correct.as_ref().ok_or_else(|| missing("correct"))?;
-                let src = self.source(clip)?;
-                let dir = self.original_dir(clip);
-                let on_event = self.options.on_event;
-                let outcome = stages::correct(step, clip, &src.motion, *seed, &dir, None, |p| {
-                    on_event(Event::Correction { job, progress: p })
-                })?;
-                self.original_outcomes.insert(
-                    clip.clone(),
-                    (outcome.report.accepted, outcome.report.r_norm),
-                );
-                // Only an accepted correction is a fair example of what the
-                // simulation does to a clip: a fall teaches the debiaser nonsense.
-                if outcome.report.accepted {
-                    self.corrected_originals
-                        .insert(clip.clone(), outcome.motion);
+    /// Runs one job with the executor; what it made, and how it ended.
+    fn execute(&self, job: &PlannedJob) -> (Vec<Made>, Result<(), PipelineError>) {
+        let work = self.options.work;
+        let dir = exec::job_dir(work, job).unwrap_or_else(|| work.to_path_buf());
+        // The manifest names a correction's report relative to the output folder.
+        let report_path = self.options.out.and_then(|out| {
+            dir.join("report.json")
+                .strip_prefix(out)
+                .ok()
+                .map(|p| p.display().to_string())
+        });
+        let on_event = self.options.on_event;
+        let on_progress =
+            |p: &correct::job::ProgressEvent| on_event(Event::Correction { job, progress: p });
+        let ctx = Context {
+            report_path,
+            on_progress: &on_progress,
+            tune_correction: self.tune,
+            ..Context::in_dir(&dir)
+        };
+        let mut made = Vec::new();
+        let result = exec::execute(job, self, &mut made, &ctx);
+        (made, result)
+    }
+
+    /// Keeps what a job made: final clips are written, others wait for
+    /// their next job.
+    fn keep(&mut self, job: &PlannedJob, made: Vec<Made>) -> Result<(), PipelineError> {
+        for m in made {
+            match m {
+                Made::Clip(clip) if job.finishes => {
+                    self.pending.remove(&clip.name);
+                    self.output(clip)?;
                 }
-                Ok(())
-            }
-            JobKind::Correct {
-                clip,
-                sources,
-                seed,
-            } => {
-                let step = recipe.correct.as_ref().ok_or_else(|| missing("correct"))?;
-                let made = self
-                    .pending
-                    .remove(clip)
-                    .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not made")))?;
-                let dir = self.correct_dir(clip);
-                let outcomes = sources
-                    .iter()
-                    .map(|s| {
-                        self.original_outcomes
-                            .get(s)
-                            .copied()
-                            .ok_or_else(|| PipelineError::Job(format!("`{s}` was not corrected")))
-                    })
-                    .collect::<Result<Vec<_>, _>>()?;
-                let warm = stages::best_warm_start(&outcomes)
-                    .map(|i| self.original_dir(&sources[i]).join("checkpoints"));
-                let on_event = self.options.on_event;
-                let outcome = stages::correct(
-                    step,
-                    clip,
-                    &made.motion,
-                    *seed,
-                    &dir,
-                    warm.as_deref(),
-                    |p| on_event(Event::Correction { job, progress: p }),
-                );
-                let outcome = match outcome {
-                    Ok(o) => o,
-                    Err(e) => {
-                        self.pending.insert(clip.clone(), made);
-                        return Err(e);
-                    }
-                };
-                let report_path = self.options.out.and_then(|out| {
-                    dir.join("report.json")
-                        .strip_prefix(out)
-                        .ok()
-                        .map(|p| p.display().to_string())
-                });
-                let summary = CorrectionSummary::new(&outcome.report, report_path);
-                let mut entry = ManifestEntry {
-                    synth: made.entry,
-                    correction: Some(summary.clone()),
-                    debiased: false,
-                };
-                entry.synth.frames = outcome.motion.frames();
-                entry.synth.fps = outcome.motion.fps();
-                let accepted = outcome.report.accepted;
-                // Debiasing keeps the correction's summary in the clip's manifest entry.
-                self.corrections.insert(clip.clone(), summary);
-                if !accepted && !step.keep_rejected {
+                Made::Clip(clip) => {
+                    self.pending.insert(clip.name.clone(), clip);
+                }
+                Made::Rejected { clip, .. } => {
+                    self.pending.remove(&clip);
                     self.summary.rejected.push(clip.clone());
+                    self.rejected.insert(clip);
+                    // Its debiasing has nothing to work on.
                     self.failed.insert(job.key.clone());
-                    return Ok(());
                 }
-                let corrected = NewClip {
-                    name: made.name,
-                    motion: outcome.motion,
-                    mask: made.mask,
-                    entry: entry.synth.clone(),
-                };
-                self.stage_done(job, corrected, entry)
-            }
-            JobKind::DebiasTrain { originals } => {
-                let config = recipe.debias.as_ref().ok_or_else(|| missing("debias"))?;
-                let mut pairs = Vec::with_capacity(originals.len());
-                for name in originals {
-                    if let Some(corrected) = self.corrected_originals.get(name) {
-                        pairs.push((corrected.clone(), self.source(name)?.motion.clone()));
-                    }
+                Made::Original { clip, outcome } => {
+                    self.originals.insert(clip, outcome);
                 }
-                let model = stages::debias_train(config, &pairs)?;
-                model.save(&self.options.work.join("debias"))?;
-                self.debiaser = Some(model);
-                Ok(())
+                Made::Debiaser(model) => self.debiaser = Some(Arc::new(model)),
             }
-            JobKind::DebiasApply { clip } => {
-                let made = self
-                    .pending
-                    .remove(clip)
-                    .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not corrected")))?;
-                let model = self
-                    .debiaser
-                    .as_ref()
-                    .ok_or_else(|| PipelineError::Job("no debiasing model".into()))?;
-                let motion = stages::debias_apply(model, &made.motion)?;
-                let entry = ManifestEntry {
-                    correction: self.corrections.remove(clip),
-                    debiased: true,
-                    synth: made.entry.clone(),
-                };
-                self.stage_done(job, NewClip { motion, ..made }, entry)
-            }
-        }
-    }
-
-    fn original_dir(&self, clip: &str) -> PathBuf {
-        self.options.work.join("originals").join(clip)
-    }
-
-    fn correct_dir(&self, clip: &str) -> PathBuf {
-        self.options.work.join("correct").join(clip)
-    }
-
-    /// New clips from a producing job.
-    fn made(&mut self, job: &PlannedJob, clips: Vec<NewClip>) -> Result<(), PipelineError> {
-        for clip in clips {
-            let entry = ManifestEntry {
-                synth: clip.entry.clone(),
-                correction: None,
-                debiased: false,
-            };
-            self.stage_done(job, clip, entry)?;
         }
         Ok(())
     }
 
-    /// A clip finished a stage: keep it for the next one, or write it out.
-    fn stage_done(
-        &mut self,
-        job: &PlannedJob,
-        clip: NewClip,
-        entry: ManifestEntry,
-    ) -> Result<(), PipelineError> {
-        if self.last_job.get(&clip.name) != Some(&job.key) {
-            self.pending.insert(clip.name.clone(), clip);
-            return Ok(());
-        }
+    /// A clip finished its last job: write it out (or keep it in memory).
+    fn output(&mut self, clip: WorkClip) -> Result<(), PipelineError> {
         if let Some(out) = self.options.out {
-            write_output(out, &clip)?;
+            write_output(out, &clip.name, &clip.motion, clip.mask.as_ref())?;
         }
-        let keep_motion = self.options.out.is_none();
-        self.summary.manifest.push(entry.clone());
-        if keep_motion {
+        self.summary.manifest.push(clip.entry.clone());
+        if self.options.out.is_none() {
             self.summary.outputs.push(Output {
                 name: clip.name,
                 motion: clip.motion,
                 mask: clip.mask,
-                entry,
+                entry: clip.entry,
             });
         }
         Ok(())
     }
 }
 
-fn missing(table: &str) -> PipelineError {
-    PipelineError::Job(format!("the recipe has no [{table}] table"))
+impl Inputs for State<'_> {
+    fn source(&self, name: &str) -> Result<Clip, PipelineError> {
+        self.sources
+            .get(name)
+            .map(|c| (*c).clone())
+            .ok_or_else(|| PipelineError::Job(format!("no clip named `{name}`")))
+    }
+
+    fn clip(&self, name: &str) -> Result<Option<WorkClip>, PipelineError> {
+        if self.rejected.contains(name) {
+            return Ok(None);
+        }
+        self.pending
+            .get(name)
+            .cloned()
+            .map(Some)
+            .ok_or_else(|| PipelineError::Job(format!("`{name}` was not made")))
+    }
+
+    fn original_report(&self, name: &str) -> Result<correct::Report, PipelineError> {
+        self.originals
+            .get(name)
+            .map(|o| o.report.clone())
+            .ok_or_else(|| PipelineError::Job(format!("`{name}` was not corrected")))
+    }
+
+    fn original_checkpoints(&self, name: &str) -> Result<PathBuf, PipelineError> {
+        Ok(self
+            .options
+            .work
+            .join("originals")
+            .join(name)
+            .join("checkpoints"))
+    }
+
+    fn corrected_original(&self, name: &str) -> Result<Option<Motion>, PipelineError> {
+        Ok(self
+            .originals
+            .get(name)
+            .filter(|o| o.report.accepted)
+            .map(|o| o.motion.clone()))
+    }
+
+    fn debiaser(&self) -> Result<Arc<debias::Debiaser>, PipelineError> {
+        self.debiaser
+            .clone()
+            .ok_or_else(|| PipelineError::Job("no debiasing model".into()))
+    }
 }
 
 /// The files of one output: `<name>.bvh` and `<name>.npz` (with the occlusion
 /// mask as a `mask` array, bool [T, J], true = visible).
-pub fn output_files(clip: &NewClip) -> Result<Vec<(String, Vec<u8>)>, PipelineError> {
-    let m = &clip.motion;
+pub fn output_files(
+    name: &str,
+    m: &Motion,
+    mask: Option<&synth::Mask>,
+) -> Result<Vec<(String, Vec<u8>)>, PipelineError> {
     let mut extras = Vec::new();
-    if let Some(mask) = &clip.mask {
+    if let Some(mask) = mask {
         extras.push(
             motion::npz::NpyArray::bool("mask", &[m.frames(), m.joints()], &mask.visible).map_err(
                 |source| PipelineError::Io {
-                    path: PathBuf::from(format!("{}.npz", clip.name)),
+                    path: PathBuf::from(format!("{}.npz", name)),
                     source,
                 },
             )?,
         );
     }
     let npz = motion::npz::motion_to_bytes(m, &extras).map_err(|source| PipelineError::Io {
-        path: PathBuf::from(format!("{}.npz", clip.name)),
+        path: PathBuf::from(format!("{}.npz", name)),
         source,
     })?;
     Ok(vec![
-        (format!("{}.bvh", clip.name), motion::bvh::to_bytes(m)),
-        (format!("{}.npz", clip.name), npz),
+        (format!("{}.bvh", name), motion::bvh::to_bytes(m)),
+        (format!("{}.npz", name), npz),
     ])
 }
 
-fn write_output(out: &Path, clip: &NewClip) -> Result<(), PipelineError> {
-    for (name, bytes) in output_files(clip)? {
+fn write_output(
+    out: &Path,
+    name: &str,
+    m: &Motion,
+    mask: Option<&synth::Mask>,
+) -> Result<(), PipelineError> {
+    for (name, bytes) in output_files(name, m, mask)? {
         motion::io::write_atomic(&out.join(name), &bytes)?;
     }
     Ok(())

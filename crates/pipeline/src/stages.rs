@@ -1,6 +1,6 @@
-//! One function per job kind: what a job does, given its inputs in memory.
-//! The in-process runner ([`crate::run`]) and the service's worker both call
-//! these, so a clip is made the same way wherever it runs.
+//! The science of each job kind, given its inputs in memory: one function per
+//! kind, called by the one executor ([`crate::exec`]) that the in-process
+//! runner, the evaluation and the service's worker all use.
 
 use std::path::Path;
 
@@ -8,7 +8,7 @@ use motion::Motion;
 use serde_json::{Map, Value, json};
 
 use crate::PipelineError;
-use crate::recipe::{CorrectStep, InteractionStep, Recipe, VaeStep};
+use crate::recipe::{CorrectStep, InteractionStep, VaeStep};
 
 /// A clip a job made, with its manifest entry.
 #[derive(Debug, Clone)]
@@ -40,17 +40,13 @@ fn entry(name: &str, motion: &Motion) -> synth::ManifestEntry {
 
 /// `synthesize`: one kinematic op output of one clip.
 pub fn synthesize(
-    recipe: &Recipe,
+    ops: &synth::Recipe,
     clip: &str,
     source: &str,
     motion: &Motion,
     job: synth::Job,
 ) -> Result<NewClip, PipelineError> {
-    let synth = recipe
-        .synth
-        .as_ref()
-        .ok_or_else(|| PipelineError::Job("the recipe has no [[ops]]".into()))?;
-    let generated = synth::run_job(synth, clip, motion, job)?;
+    let generated = synth::run_job(ops, clip, motion, job)?;
     let entry = generated.manifest_entry(format!("{}.bvh", generated.name), source);
     Ok(NewClip {
         name: generated.name,
@@ -60,20 +56,11 @@ pub fn synthesize(
     })
 }
 
-/// Index in the manifest of the `[vae]` table's outputs: after the `[[ops]]`.
-pub fn vae_op_index(recipe: &Recipe) -> usize {
-    recipe.synth.as_ref().map_or(0, |s| s.ops.len())
-}
-
-/// Index in the manifest of the `[interaction]` table's outputs.
-pub fn interaction_op_index(recipe: &Recipe) -> usize {
-    vae_op_index(recipe) + 1
-}
-
-/// `vae`: train the motion VAE on a class's clips, then sample `copies` clips.
+/// `vae`: train the motion VAE on a class's clips, then sample `copies` clips
+/// (manifest op index `op_index`).
 pub fn vae(
-    recipe: &Recipe,
     step: &VaeStep,
+    op_index: usize,
     group: &str,
     clips: &[(String, Motion)],
     seed: u64,
@@ -92,7 +79,6 @@ pub fn vae(
     let names = crate::plan::vae_outputs(group, step.copies);
     let sources: Vec<Value> = clips.iter().map(|(n, _)| json!(n)).collect();
     let params = serde_json::to_value(step).unwrap_or(Value::Null);
-    let op_index = vae_op_index(recipe);
     Ok(samples
         .into_iter()
         .zip(names)
@@ -122,8 +108,8 @@ pub fn vae(
 
 /// `interaction`: body-size variations of partner B, both partners adapted.
 pub fn interaction(
-    recipe: &Recipe,
     step: &InteractionStep,
+    op_index: usize,
     stem: &str,
     a: &Motion,
     b: &Motion,
@@ -131,13 +117,10 @@ pub fn interaction(
 ) -> Result<Vec<NewClip>, PipelineError> {
     let span = tracing::info_span!("interaction_job", pair = stem);
     let _guard = span.enter();
-    let spec = recipe
-        .interaction_spec(seed)
-        .ok_or_else(|| PipelineError::Job("the recipe has no [interaction]".into()))?;
+    let spec = step.spec(seed);
     let variations =
         interaction::variations(a, b, &spec, &interaction::RetargetOptions::default())?;
     let params = serde_json::to_value(step).unwrap_or(Value::Null);
-    let op_index = interaction_op_index(recipe);
     let names = crate::plan::interaction_outputs(stem, step.copies);
     let mut out = Vec::with_capacity(names.len());
     for (v, names) in variations.into_iter().zip(names.chunks(2)) {

@@ -182,6 +182,78 @@ fn the_plan_orders_jobs_after_their_inputs() {
     );
 }
 
+/// The service stores the plan as JSON and runs it as planned: every job
+/// round-trips, carries its settings (defaults filled in at planning) and
+/// says whether its outputs are final.
+#[test]
+fn the_plan_is_stored_as_planned_with_its_settings() {
+    let recipe = Recipe::from_toml_str(
+        r#"
+        seed = 9
+        [[ops]]
+        op = "noise"
+        copies = 2
+        [[ops]]
+        op = "ik"
+        preset = "kick"
+        [vae]
+        copies = 1
+        [correct]
+        time_budget_s = 12
+        [debias]
+        iterations = 7
+        "#,
+    )
+    .expect("recipe");
+    let names: Vec<String> = [
+        "HDM_bd_kickLFront1Reps_001_120",
+        "HDM_bk_kickLFront1Reps_002_120",
+    ]
+    .map(String::from)
+    .to_vec();
+    let planned = plan(&recipe, &names, 9);
+    let json = serde_json::to_string(&planned).expect("plan as JSON");
+    let stored: pipeline::Plan = serde_json::from_str(&json).expect("plan from JSON");
+    assert_eq!(stored, planned);
+
+    // One synthesis job per clip, with every output of it.
+    let synth = planned
+        .job("synthesize:HDM_bd_kickLFront1Reps_001_120")
+        .expect("synthesize job");
+    let JobKind::Synthesize { outputs, ops, .. } = &synth.kind else {
+        panic!("{synth:?}")
+    };
+    assert_eq!(outputs.len(), 3);
+    assert_eq!(ops.ops.len(), 2);
+    assert_eq!(
+        synth.outputs[2],
+        "HDM_bd_kickLFront1Reps_001_120__01_ik_000"
+    );
+    // Settings resolved once: the recipe's values and the defaults it left out.
+    for job in &planned.jobs {
+        match &job.kind {
+            JobKind::Correct { step, .. } | JobKind::CorrectOriginal { step, .. } => {
+                assert_eq!(step.time_budget_s, 12.0);
+                assert_eq!(step.envs, pipeline::CorrectStep::default().envs);
+            }
+            JobKind::DebiasTrain { config, .. } => assert_eq!(config.iterations, 7),
+            JobKind::Vae { step, op_index, .. } => {
+                assert_eq!(step.copies, 1);
+                assert_eq!(*op_index, 2, "after the two [[ops]]");
+            }
+            _ => {}
+        }
+        // Only debiasing finishes a corrected clip.
+        let final_here = matches!(job.kind, JobKind::DebiasApply { .. });
+        if !job.outputs.is_empty() {
+            assert_eq!(job.finishes, final_here, "{}", job.key);
+        }
+    }
+    // Without [correct], synthesis and the VAE finish their clips.
+    let plain = Recipe::from_toml_str("[[ops]]\nop = \"mirror\"\n").expect("recipe");
+    assert!(plan(&plain, &names, 0).jobs.iter().all(|j| j.finishes));
+}
+
 const CORRECTED: &str = r#"
     seed = 5
     [[ops]]

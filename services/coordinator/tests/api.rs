@@ -747,10 +747,18 @@ async fn augment_poll_and_download_through_the_worker_api() {
         let id = job["id"].as_str().unwrap();
         let epoch = job["epoch"].as_i64().unwrap();
         assert_eq!(job["input"]["clip_name"], expected_clip);
-        assert_eq!(job["input"]["seed"], 3);
+        // The job is stored as planned, seeded by the augmentation's seed (3).
+        let recipe = pipeline::Recipe::from_value(noise_recipe()).unwrap();
+        let names = ["walk".to_string(), "jump".to_string()];
+        let planned = pipeline::plan(&recipe, &names, 3);
+        let key = format!("synthesize:{expected_clip}");
+        assert_eq!(
+            job["input"]["job"],
+            serde_json::to_value(planned.job(&key).unwrap()).unwrap()
+        );
         assert_eq!(job["has_checkpoint"], false);
         // The worker can read the clip it was given.
-        let clip_id = job["input"]["clip_id"].as_str().unwrap();
+        let clip_id = job["input"]["clips"][0]["clip_id"].as_str().unwrap();
         let source = app
             .worker(reqwest::Method::GET, &format!("/clips/{clip_id}/source"))
             .send()

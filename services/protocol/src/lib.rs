@@ -17,9 +17,8 @@ use uuid::Uuid;
 /// Path prefix of the worker API on the coordinator.
 pub const WORKER_API_PREFIX: &str = "/internal/v1";
 
-/// Job kinds the coordinator schedules and workers run: the kinds of
-/// `pipeline::JobKind` (the plan's per-output `synthesize` jobs of one clip run
-/// as one `synthesize` job, see docs/SERVICE.md).
+/// Job kinds the coordinator schedules and workers run: the names of
+/// `pipeline::JobKind` (`JobKind::name`).
 pub mod kinds {
     /// Kinematic synthesis of one clip with the augmentation's recipe.
     pub const SYNTHESIZE: &str = "synthesize";
@@ -70,7 +69,7 @@ pub struct ClaimedJob {
     pub kind: String,
     /// 1 for the first run, 2 for the first retry, ...
     pub attempt: i32,
-    /// Kind-specific input (for `synthesize`: [`SynthesizeInput`]).
+    /// The job's [`PipelineInput`].
     pub input: serde_json::Value,
     /// The lease expires this long after the last heartbeat.
     pub lease_ms: u64,
@@ -112,7 +111,7 @@ pub struct HeartbeatReply {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CompleteRequest {
     pub epoch: i64,
-    /// Kind-specific output (for `synthesize`: [`SynthesizeOutput`]).
+    /// The job's [`JobOutput`].
     pub output: serde_json::Value,
 }
 
@@ -143,33 +142,14 @@ pub enum ClipFormat {
     Amc,
 }
 
-/// Input of a `synthesize` job.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SynthesizeInput {
-    pub clip_id: Uuid,
-    /// Clip name inside its dataset (file stem); outputs are named after it.
-    pub clip_name: String,
-    /// The uploaded file name (used in error messages and the manifest).
-    pub source_name: String,
-    /// File name of the ASF skeleton for AMC clips.
-    pub skeleton_name: Option<String>,
-    pub format: ClipFormat,
-    /// The augmentation's recipe, as accepted by `POST /v1/datasets/{id}/augmentations`.
-    pub recipe: serde_json::Value,
-    /// Seed for this clip's outputs.
-    pub seed: u64,
-}
-
-/// Input of every job kind but `synthesize`: one job of `pipeline::plan`.
+/// Input of every job: one job of `pipeline::plan`, as planned at submission
+/// (it carries its settings), and the stored source clips it reads.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PipelineInput {
-    /// The planned job (key, `pipeline::JobKind`, deps and outputs by key).
+    /// The planned job (key, `pipeline::JobKind` with its settings, deps and outputs by key).
     pub job: pipeline::PlannedJob,
     /// The clip the job is about, when there is one (shown with errors).
     pub clip_name: Option<String>,
-    /// The augmentation's recipe, as accepted by `POST /v1/datasets/{id}/augmentations`.
-    pub recipe: serde_json::Value,
-    pub seed: u64,
     /// The stored source clips the job reads.
     pub clips: Vec<ClipRef>,
 }
@@ -224,11 +204,9 @@ impl JobOutput {
     }
 }
 
-/// Output of a `synthesize` job.
-pub type SynthesizeOutput = JobOutput;
-
 /// Checkpoint of a `synthesize` job: outputs `0..done` are uploaded, with their
 /// manifest entries and file names, so a resumed attempt continues at `done`.
+/// (A correction's checkpoint is instead a zip of its latest PPO checkpoint.)
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct SynthesizeCheckpoint {
     pub done: usize,
@@ -237,4 +215,31 @@ pub struct SynthesizeCheckpoint {
     /// Outputs kept for their correction instead (recipes with `[correct]`).
     #[serde(default)]
     pub clips: Vec<WorkClip>,
+}
+
+/// Names of the artifacts jobs store for later jobs, in one place: the worker
+/// that writes them and the worker that reads them agree by construction.
+pub mod artifacts {
+    /// A clip kept for its next job: `work/<folder>/<name>.npz`.
+    pub fn work_clip(folder: &str, name: &str) -> String {
+        format!("work/{folder}/{name}.npz")
+    }
+    /// A source clip's corrected motion (`correct_original`).
+    pub fn original_corrected(clip: &str) -> String {
+        format!("work/originals/{clip}/corrected.npz")
+    }
+    /// A source clip's latest correction checkpoint, zipped (a warm start).
+    pub fn original_checkpoints(clip: &str) -> String {
+        format!("work/originals/{clip}/checkpoints.zip")
+    }
+    /// A source clip's correction report (`correct::Report`).
+    pub fn original_report(clip: &str) -> String {
+        format!("work/originals/{clip}/report.json")
+    }
+    /// A new clip's correction report; part of the results (the manifest names it).
+    pub fn correction_report(clip: &str) -> String {
+        format!("work/correct/{clip}/report.json")
+    }
+    /// The debiasing network, zipped.
+    pub const DEBIAS_MODEL: &str = "work/debias/model.zip";
 }

@@ -5,15 +5,17 @@
 //! * [`config`]: settings from the environment.
 //! * [`client`]: the coordinator's internal worker API.
 //! * [`runner`]: claim loop, heartbeats, cancellation and shutdown.
-//! * [`synthesize`]: the `synthesize` job (kinematic synthesis of one clip).
-//! * [`stages`]: every other job kind of the augmentation's graph (VAE,
-//!   interaction, physical correction, debiasing).
+//! * [`jobs`]: running a job with the pipeline's one executor, its inputs
+//!   fetched from the coordinator and its outputs uploaded (transport only).
+//! * [`transfer`]: downloads and uploads with retries and stop reasons.
+//! * [`archive`]: folders (PPO checkpoints, the debiasing model) as zips.
 
+mod archive;
 pub mod client;
 pub mod config;
+pub mod jobs;
 pub mod runner;
-pub mod stages;
-pub mod synthesize;
+mod transfer;
 
 pub use config::WorkerConfig;
 pub use runner::run;

@@ -14,7 +14,7 @@ use tracing::Instrument;
 
 use crate::client::{Coordinator, Reply, with_retries};
 use crate::config::WorkerConfig;
-use crate::{stages, synthesize};
+use crate::jobs;
 
 /// Job kinds this worker runs.
 pub const KINDS: &[&str] = kinds::ALL;
@@ -230,7 +230,7 @@ async fn run_claimed(
             watcher_control.set_stop(Stop::Shutdown);
         });
         let patience = Duration::from_millis(job.lease_ms.saturating_mul(2)).max(Duration::from_secs(10));
-        let ctx = JobContext {
+        let ctx = Arc::new(JobContext {
             coordinator: coordinator.clone(),
             job: job.clone(),
             control: control.clone(),
@@ -238,10 +238,9 @@ async fn run_claimed(
             patience,
             work_dir: config.work_dir.clone(),
             checkpoint_every: config.checkpoint_every,
-        };
+        });
         let result = match job.kind.as_str() {
-            kinds::SYNTHESIZE => synthesize::run(&ctx).await,
-            other if KINDS.contains(&other) => stages::run(&ctx).await,
+            other if KINDS.contains(&other) => jobs::run(ctx.clone()).await,
             other => Err(JobFailure::permanent(format!("this worker cannot run jobs of kind `{other}`"))),
         };
         watcher.abort();

@@ -15,8 +15,7 @@ use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use chrono::{DateTime, Utc};
 use futures_util::Stream;
-use motionaug_protocol::{ClipFormat, ClipRef, JobOutput, PipelineInput, SynthesizeInput, kinds};
-use pipeline::JobKind;
+use motionaug_protocol::{ClipFormat, ClipRef, JobOutput, PipelineInput};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use tokio::sync::broadcast::error::RecvError;
@@ -120,98 +119,39 @@ struct NewJob {
     deps: Vec<String>,
 }
 
-/// The augmentation's jobs: `pipeline::plan`, with the plan's per-output
-/// `synthesize` jobs of one clip merged into one `synthesize:<clip>` job (they
-/// take milliseconds each; that job checkpoints after every output).
-fn graph(
-    recipe_value: &Value,
-    recipe: &pipeline::Recipe,
-    clips: &[ClipRow],
-    seed: u64,
-) -> Result<Vec<NewJob>, ApiError> {
+/// The augmentation's jobs: `pipeline::plan` as planned (each job carries its
+/// settings), with the stored clips each job reads.
+fn graph(recipe: &pipeline::Recipe, clips: &[ClipRow], seed: u64) -> Result<Vec<NewJob>, ApiError> {
     let names: Vec<String> = clips.iter().map(|c| c.1.clone()).collect();
     let plan = pipeline::plan(recipe, &names, seed);
     let by_name: HashMap<&str, &ClipRow> = clips.iter().map(|c| (c.1.as_str(), c)).collect();
-    // Plan key -> stored job key.
-    let mut stored_key: HashMap<&str, String> = HashMap::new();
-    let mut jobs: Vec<NewJob> = Vec::new();
-    for planned in &plan.jobs {
-        if let JobKind::Synthesize { clip, .. } = &planned.kind {
-            let key = format!("{}:{clip}", kinds::SYNTHESIZE);
-            stored_key.insert(&planned.key, key.clone());
-            if jobs.iter().any(|j| j.key == key) {
-                continue;
-            }
-            let row = by_name
-                .get(clip.as_str())
-                .ok_or_else(|| ApiError::internal(format!("the plan names no clip `{clip}`")))?;
-            let r = clip_ref(row);
-            let input = SynthesizeInput {
-                clip_id: r.clip_id,
-                clip_name: r.clip_name,
-                source_name: r.source_name,
-                skeleton_name: r.skeleton_name,
-                format: r.format,
-                recipe: recipe_value.clone(),
-                seed,
+    plan.jobs
+        .into_iter()
+        .map(|planned| {
+            let clips = planned
+                .kind
+                .sources()
+                .into_iter()
+                .map(|n| {
+                    by_name
+                        .get(n)
+                        .map(|row| clip_ref(row))
+                        .ok_or_else(|| ApiError::internal(format!("the plan names no clip `{n}`")))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let input = PipelineInput {
+                clip_name: planned.kind.clip().map(str::to_string),
+                clips,
+                job: planned.clone(),
             };
-            jobs.push(NewJob {
-                key,
-                kind: kinds::SYNTHESIZE,
+            Ok(NewJob {
+                key: planned.key,
+                kind: planned.kind.name(),
                 input: to_json(&input)?,
-                deps: Vec::new(),
-            });
-            continue;
-        }
-        let (kind, clip_name, reads): (&'static str, Option<&String>, Vec<&String>) =
-            match &planned.kind {
-                JobKind::Synthesize { .. } => unreachable!("handled above"),
-                JobKind::Vae { clips, .. } => (kinds::VAE, None, clips.iter().collect()),
-                JobKind::Interaction { a, b, .. } => (kinds::INTERACTION, Some(a), vec![a, b]),
-                JobKind::CorrectOriginal { clip, .. } => {
-                    (kinds::CORRECT_ORIGINAL, Some(clip), vec![clip])
-                }
-                JobKind::Correct { clip, .. } => (kinds::CORRECT, Some(clip), vec![]),
-                JobKind::DebiasTrain { originals } => {
-                    (kinds::DEBIAS_TRAIN, None, originals.iter().collect())
-                }
-                JobKind::DebiasApply { clip } => (kinds::DEBIAS_APPLY, Some(clip), vec![]),
-            };
-        let clips = reads
-            .into_iter()
-            .map(|n| {
-                by_name
-                    .get(n.as_str())
-                    .map(|row| clip_ref(row))
-                    .ok_or_else(|| ApiError::internal(format!("the plan names no clip `{n}`")))
+                deps: planned.deps,
             })
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut deps = Vec::new();
-        for d in &planned.deps {
-            let k = stored_key
-                .get(d.as_str())
-                .cloned()
-                .ok_or_else(|| ApiError::internal(format!("{}: unknown input {d}", planned.key)))?;
-            if !deps.contains(&k) {
-                deps.push(k);
-            }
-        }
-        stored_key.insert(&planned.key, planned.key.clone());
-        let input = PipelineInput {
-            job: planned.clone(),
-            clip_name: clip_name.cloned(),
-            recipe: recipe_value.clone(),
-            seed,
-            clips,
-        };
-        jobs.push(NewJob {
-            key: planned.key.clone(),
-            kind,
-            input: to_json(&input)?,
-            deps,
-        });
-    }
-    Ok(jobs)
+        })
+        .collect()
 }
 
 fn to_json<T: Serialize>(value: &T) -> Result<Value, ApiError> {
@@ -235,7 +175,7 @@ pub async fn create(
     .bind(dataset_id)
     .fetch_all(&state.db)
     .await?;
-    let jobs = graph(&recipe_value, &recipe, &clips, seed)?;
+    let jobs = graph(&recipe, &clips, seed)?;
     if jobs.is_empty() {
         return Err(ApiError::unprocessable(
             "recipe: makes nothing from this dataset (no clip class has `[vae] min_clips` clips, \
