@@ -158,6 +158,9 @@ fn closest_approach(a: &[DVec3], b: &[DVec3], na: usize, nb: usize, frames: usiz
 }
 
 /// Retarget the interaction (`a`, `b`) to B's body scaled by `scale`.
+///
+/// Stages: B's naive retarget, the optimiser's problem over both bodies'
+/// points, its solution, rotations fitted back on each skeleton, the report.
 pub fn retarget(
     a: &Motion,
     b: &Motion,
@@ -180,87 +183,19 @@ pub fn retarget(
 
     let locked_a = locked_joints(a);
     let locked_b = locked_joints(b);
-    let layout_a = Layout::new(a.skeleton(), &locked_a, a.pose(0));
-    let layout_b_src = Layout::new(b.skeleton(), &locked_b, b.pose(0));
-    let layout_b = Layout::new(b_naive.skeleton(), &locked_b, b.pose(0));
-    let (n_a, n_b) = (layout_a.len(), layout_b.len());
-    let n = n_a + n_b;
-
-    let pts_a = layout_a.all_positions(a);
-    let pts_b_src = layout_b_src.all_positions(b);
-    let pts_b_ref = layout_b.all_positions(&b_naive);
-    let mut source = Vec::with_capacity(frames * n);
-    let mut reference = Vec::with_capacity(frames * n);
-    for t in 0..frames {
-        source.extend_from_slice(&pts_a[t * n_a..(t + 1) * n_a]);
-        source.extend_from_slice(&pts_b_src[t * n_b..(t + 1) * n_b]);
-        reference.extend_from_slice(&pts_a[t * n_a..(t + 1) * n_a]);
-        reference.extend_from_slice(&pts_b_ref[t * n_b..(t + 1) * n_b]);
-    }
-
-    let mut rods: Vec<Rod> = layout_a.rods.clone();
-    rods.extend(layout_b.rods.iter().map(|r| Rod {
-        a: r.a + n_a,
-        b: r.b + n_a,
-        length: r.length,
-    }));
-
-    let pairs = contact::key_pairs(a, b, &layout_a, &layout_b_src, &options.key_pairs)?;
-    let ramp = (options.key_pairs.ramp_s * a.fps()).round() as usize;
-    let pair_terms = pairs
-        .iter()
-        .map(|k| PairTerm {
-            a: layout_a.joint_point[k.a],
-            b: n_a + layout_b.joint_point[k.b],
-            weight: contact::pair_weights(k, frames, ramp),
-        })
-        .collect();
-
-    let mut feet = Vec::new();
-    if options.plant_feet {
-        for (p, contact) in contact::foot_contacts(a, &layout_a, &pts_a) {
-            feet.push(FootTerm { point: p, contact });
-        }
-        for (p, contact) in contact::foot_contacts(&b_naive, &layout_b, &pts_b_ref) {
-            feet.push(FootTerm {
-                point: n_a + p,
-                contact,
-            });
-        }
-    }
-
-    let problem = Problem {
-        frames,
-        n_a,
-        n_b,
-        source,
-        reference,
-        rods,
-        pairs: pair_terms,
-        feet,
+    let layouts = Layouts {
+        a: Layout::new(a.skeleton(), &locked_a, a.pose(0)),
+        b_src: Layout::new(b.skeleton(), &locked_b, b.pose(0)),
+        b: Layout::new(b_naive.skeleton(), &locked_b, b.pose(0)),
     };
+    let (n_a, n_b) = (layouts.a.len(), layouts.b.len());
+    let n = n_a + n_b;
+    let (problem, pairs) = layouts.problem(a, b, &b_naive, options)?;
     let (solved, stats) = problem.solve(&options.solver)?;
 
     // Rotations back on each skeleton.
-    let fit = |m: &Motion, skel_motion: &Motion, layout: &Layout, offset: usize, count: usize| {
-        let nj = skel_motion.joints();
-        let mut root = Vec::with_capacity(frames);
-        let mut rot = vec![glam::DQuat::IDENTITY; frames * nj];
-        for t in 0..frames {
-            let pts = &solved[t * n + offset..t * n + offset + count];
-            let r = ik::pose_from_points(
-                skel_motion.skeleton(),
-                layout,
-                m.pose(t),
-                pts,
-                &mut rot[t * nj..(t + 1) * nj],
-            );
-            root.push(r);
-        }
-        Motion::new(skel_motion.skeleton().clone(), m.fps(), root, rot)
-    };
-    let out_a = fit(a, a, &layout_a, 0, n_a)?;
-    let out_b = fit(b, &b_naive, &layout_b, n_a, n_b)?;
+    let out_a = fit(a, a, &layouts.a, &solved, n, 0..n_a)?;
+    let out_b = fit(b, &b_naive, &layouts.b, &solved, n, n_a..n)?;
 
     // Report.
     let (na, nb) = (a.joints(), b.joints());
@@ -269,33 +204,10 @@ pub fn retarget(
     let naive_b = b_naive.all_world_positions();
     let key_pairs: Vec<KeyPairReport> = pairs
         .into_iter()
-        .map(|k| {
-            let span = k.first_frame..=k.last_frame;
-            let count = (k.last_frame + 1 - k.first_frame) as f64;
-            let (mut out_sum, mut err_sum) = (0.0, 0.0);
-            for t in span {
-                let d_src = joint_distances(&src_a, &src_b, na, nb, k.a, k.b, t);
-                let d_out = joint_distances(&o_a, &o_b, na, nb, k.a, k.b, t);
-                out_sum += d_out;
-                err_sum += (d_out - d_src).abs();
-            }
-            KeyPairReport {
-                pair: k,
-                output_mean_m: out_sum / count,
-                jpd_m: err_sum / count,
-            }
-        })
+        .map(|k| key_pair_report(k, (&src_a, &src_b), (&o_a, &o_b), na, nb))
         .collect();
     let jpd_m = (!key_pairs.is_empty())
         .then(|| key_pairs.iter().map(|k| k.jpd_m).sum::<f64>() / key_pairs.len() as f64);
-    let skate = |m: &Motion| metrics::plausibility(m).foot_skating_m_s;
-    let (a0, a1, b0, bn, b1) = (
-        skate(a),
-        skate(&out_a),
-        skate(b),
-        skate(&b_naive),
-        skate(&out_b),
-    );
     let mean_shift = |x: &[DVec3], y: &[DVec3]| {
         x.iter()
             .zip(y)
@@ -314,14 +226,7 @@ pub fn retarget(
         bone_error_m: bone_target_err,
         jpd_m,
         key_pairs,
-        foot_skating: FootSkating {
-            a_source_m_s: a0,
-            a_output_m_s: a1,
-            b_source_m_s: b0,
-            b_naive_m_s: bn,
-            b_output_m_s: b1,
-            change_m_s: (a1 - a0) + (b1 - b0),
-        },
+        foot_skating: foot_skating(a, &out_a, b, &b_naive, &out_b),
         a_shift_mean_m: mean_shift(&o_a, &src_a),
         b_shift_mean_m: mean_shift(&o_b, &naive_b),
         closest_approach_source_m: closest_approach(&src_a, &src_b, na, nb, frames),
@@ -335,4 +240,161 @@ pub fn retarget(
         b: out_b,
         report,
     })
+}
+
+/// The point layouts of A, of B's source skeleton and of B's scaled one.
+struct Layouts {
+    a: Layout,
+    b_src: Layout,
+    b: Layout,
+}
+
+impl Layouts {
+    /// The optimiser's problem over A's points then B's: source (B unscaled)
+    /// and reference (B naively retargeted) positions, both bodies' rods, the
+    /// key pairs (also returned, for the report) and the planted feet.
+    fn problem(
+        &self,
+        a: &Motion,
+        b: &Motion,
+        b_naive: &Motion,
+        options: &RetargetOptions,
+    ) -> Result<(Problem, Vec<KeyPair>), InteractionError> {
+        let frames = a.frames();
+        let (n_a, n_b) = (self.a.len(), self.b.len());
+        let n = n_a + n_b;
+        let pts_a = self.a.all_positions(a);
+        let pts_b_src = self.b_src.all_positions(b);
+        let pts_b_ref = self.b.all_positions(b_naive);
+        let mut source = Vec::with_capacity(frames * n);
+        let mut reference = Vec::with_capacity(frames * n);
+        for t in 0..frames {
+            source.extend_from_slice(&pts_a[t * n_a..(t + 1) * n_a]);
+            source.extend_from_slice(&pts_b_src[t * n_b..(t + 1) * n_b]);
+            reference.extend_from_slice(&pts_a[t * n_a..(t + 1) * n_a]);
+            reference.extend_from_slice(&pts_b_ref[t * n_b..(t + 1) * n_b]);
+        }
+
+        let mut rods: Vec<Rod> = self.a.rods.clone();
+        rods.extend(self.b.rods.iter().map(|r| Rod {
+            a: r.a + n_a,
+            b: r.b + n_a,
+            length: r.length,
+        }));
+
+        let pairs = contact::key_pairs(a, b, &self.a, &self.b_src, &options.key_pairs)?;
+        let ramp = (options.key_pairs.ramp_s * a.fps()).round() as usize;
+        let pair_terms = pairs
+            .iter()
+            .map(|k| PairTerm {
+                a: self.a.joint_point[k.a],
+                b: n_a + self.b.joint_point[k.b],
+                weight: contact::pair_weights(k, frames, ramp),
+            })
+            .collect();
+
+        let mut feet = Vec::new();
+        if options.plant_feet {
+            for (p, contact) in contact::foot_contacts(a, &self.a, &pts_a) {
+                feet.push(FootTerm { point: p, contact });
+            }
+            for (p, contact) in contact::foot_contacts(b_naive, &self.b, &pts_b_ref) {
+                feet.push(FootTerm {
+                    point: n_a + p,
+                    contact,
+                });
+            }
+        }
+
+        let problem = Problem {
+            frames,
+            n_a,
+            n_b,
+            source,
+            reference,
+            rods,
+            pairs: pair_terms,
+            feet,
+        };
+        Ok((problem, pairs))
+    }
+}
+
+/// `skel_motion`'s skeleton posed on one body's solved points (`range` of
+/// each frame's `n` points in `solved`), starting from the poses of `m`.
+fn fit(
+    m: &Motion,
+    skel_motion: &Motion,
+    layout: &Layout,
+    solved: &[DVec3],
+    n: usize,
+    range: std::ops::Range<usize>,
+) -> Result<Motion, motion::MotionError> {
+    let frames = m.frames();
+    let nj = skel_motion.joints();
+    let mut root = Vec::with_capacity(frames);
+    let mut rot = vec![glam::DQuat::IDENTITY; frames * nj];
+    for t in 0..frames {
+        let pts = &solved[t * n + range.start..t * n + range.end];
+        let r = ik::pose_from_points(
+            skel_motion.skeleton(),
+            layout,
+            m.pose(t),
+            pts,
+            &mut rot[t * nj..(t + 1) * nj],
+        );
+        root.push(r);
+    }
+    Motion::new(skel_motion.skeleton().clone(), m.fps(), root, rot)
+}
+
+/// A key pair's output distance and its error against the source over its
+/// stretch (world positions `[frame][joint]` of A and B, `na` and `nb` joints).
+fn key_pair_report(
+    k: KeyPair,
+    (src_a, src_b): (&[DVec3], &[DVec3]),
+    (o_a, o_b): (&[DVec3], &[DVec3]),
+    na: usize,
+    nb: usize,
+) -> KeyPairReport {
+    let span = k.first_frame..=k.last_frame;
+    let count = (k.last_frame + 1 - k.first_frame) as f64;
+    let (mut out_sum, mut err_sum) = (0.0, 0.0);
+    for t in span {
+        let d_src = joint_distances(src_a, src_b, na, nb, k.a, k.b, t);
+        let d_out = joint_distances(o_a, o_b, na, nb, k.a, k.b, t);
+        out_sum += d_out;
+        err_sum += (d_out - d_src).abs();
+    }
+    KeyPairReport {
+        pair: k,
+        output_mean_m: out_sum / count,
+        jpd_m: err_sum / count,
+    }
+}
+
+/// Foot skating of A's source and output, B's source, naive and output.
+fn foot_skating(
+    a: &Motion,
+    out_a: &Motion,
+    b: &Motion,
+    b_naive: &Motion,
+    out_b: &Motion,
+) -> FootSkating {
+    let skate = |m: &Motion| metrics::plausibility(m).foot_skating_m_s;
+    let (a0, a1, b0, bn, b1) = (
+        skate(a),
+        skate(out_a),
+        skate(b),
+        skate(b_naive),
+        skate(out_b),
+    );
+    FootSkating {
+        a_source_m_s: a0,
+        a_output_m_s: a1,
+        b_source_m_s: b0,
+        b_naive_m_s: bn,
+        b_output_m_s: b1,
+        change_m_s: (a1 - a0) + (b1 - b0),
+    }
 }

@@ -39,7 +39,7 @@
 //!   Laplacian does not see.
 
 use glam::DVec3;
-use nalgebra::{DMatrix, linalg::Cholesky};
+use nalgebra::{DMatrix, Dyn, linalg::Cholesky};
 use serde::{Deserialize, Serialize};
 
 use crate::InteractionError;
@@ -172,6 +172,31 @@ pub struct SolveStats {
     pub rod_residual_max_m: f64,
 }
 
+/// Buffers reused from frame to frame, and the contact anchors carried over.
+struct Work {
+    neighbours: Vec<(usize, f64)>,
+    /// Horizontal target of each foot term, set where its contact starts.
+    anchors: Vec<DVec3>,
+    /// Swinging sole points of the frame and their reference heights.
+    swing: Vec<(usize, f64)>,
+}
+
+/// A frame's normal equations `m x = rhs` (one right-hand side per axis).
+struct System {
+    m: DMatrix<f64>,
+    rhs: Vec<DVec3>,
+}
+
+impl System {
+    /// The term `w |x_a - x_b - ...|^2`'s matrix part.
+    fn add_diff(&mut self, a: usize, b: usize, w: f64) {
+        self.m[(a, a)] += w;
+        self.m[(b, b)] += w;
+        self.m[(a, b)] -= w;
+        self.m[(b, a)] -= w;
+    }
+}
+
 impl Problem {
     fn n(&self) -> usize {
         self.n_a + self.n_b
@@ -182,166 +207,28 @@ impl Problem {
     }
 
     /// Solve every frame; returns positions `[frame][point]`.
+    ///
+    /// Per frame: the prediction from the previous solution, the linear system
+    /// of the energy (factorised once), then the local/global iterations.
     pub fn solve(&self, o: &SolverOptions) -> Result<(Vec<DVec3>, SolveStats), InteractionError> {
         o.validate()?;
         let n = self.n();
         let mut out: Vec<DVec3> = Vec::with_capacity(self.frames * n);
         let mut stats = SolveStats::default();
-        let mut neighbours: Vec<(usize, f64)> = Vec::new();
-        let mut anchors = vec![DVec3::ZERO; self.feet.len()];
-        let mut swing: Vec<(usize, f64)> = Vec::new();
+        let mut work = Work {
+            neighbours: Vec::new(),
+            anchors: vec![DVec3::ZERO; self.feet.len()],
+            swing: Vec::new(),
+        };
         for t in 0..self.frames {
-            let src = &self.source[t * n..(t + 1) * n];
-            let refp = &self.reference[t * n..(t + 1) * n];
             let prev: Option<&[DVec3]> = (t > 0).then(|| &out[(t - 1) * n..t * n]);
-            let predicted: Vec<DVec3> = match prev {
-                None => refp.to_vec(),
-                Some(p) => {
-                    let r0 = &self.reference[(t - 1) * n..t * n];
-                    (0..n).map(|i| p[i] + refp[i] - r0[i]).collect()
-                }
-            };
-
-            let mut m = DMatrix::<f64>::zeros(n, n);
-            let mut rhs = vec![DVec3::ZERO; n];
-            // Laplacian rows: x_i - sum_j w_ij x_j = delta_i.
-            for i in 0..n {
-                self.neighbours(src, i, o, &mut neighbours);
-                if neighbours.is_empty() {
-                    continue;
-                }
-                let other_min = neighbours
-                    .iter()
-                    .filter(|(j, _)| self.body(*j) != self.body(i))
-                    .map(|(j, _)| (src[*j] - src[i]).length())
-                    .fold(f64::INFINITY, f64::min);
-                let lam = o.laplacian
-                    * (1.0 + o.close_boost * (-(other_min / o.close_radius_m).powi(2)).exp());
-                let mut delta = DVec3::ZERO;
-                for &(j, w) in &neighbours {
-                    let e = if self.body(j) == self.body(i) {
-                        refp[i] - refp[j]
-                    } else {
-                        src[i] - src[j]
-                    };
-                    delta += w * e;
-                }
-                // row r: +1 at i, -w_j at j.
-                let mut row: Vec<(usize, f64)> = Vec::with_capacity(neighbours.len() + 1);
-                row.push((i, 1.0));
-                row.extend(neighbours.iter().map(|&(j, w)| (j, -w)));
-                for &(a, ca) in &row {
-                    rhs[a] += lam * ca * delta;
-                    for &(b, cb) in &row {
-                        m[(a, b)] += lam * ca * cb;
-                    }
-                }
-            }
-            let add_diff = |m: &mut DMatrix<f64>, a: usize, b: usize, w: f64| {
-                m[(a, a)] += w;
-                m[(b, b)] += w;
-                m[(a, b)] -= w;
-                m[(b, a)] -= w;
-            };
-            for r in &self.rods {
-                add_diff(&mut m, r.a, r.b, o.rod);
-            }
-            for p in &self.pairs {
-                let w = o.key_pair * p.weight[t];
-                if w > 0.0 {
-                    add_diff(&mut m, p.a, p.b, w);
-                    let target = src[p.a] - src[p.b];
-                    rhs[p.a] += w * target;
-                    rhs[p.b] -= w * target;
-                }
-            }
-            swing.clear();
-            for (f, anchor) in self.feet.iter().zip(anchors.iter_mut()) {
-                let i = f.point;
-                if !f.contact[t] {
-                    // Swing: keep at least the reference clearance, so a body
-                    // pulled down does not drag a swinging sole into ground contact
-                    // while it still moves. Height only, one-sided: projected in
-                    // the local step.
-                    if o.swing > 0.0 {
-                        m[(i, i)] += o.swing;
-                        swing.push((i, refp[i].y));
-                    }
-                    continue;
-                }
-                // A contact's horizontal target is fixed when it starts: holding
-                // the previous *solved* position instead lets the slip of every
-                // frame add up whenever other terms pull on the body.
-                if t == 0 || !f.contact[t - 1] {
-                    *anchor = predicted[i];
-                }
-                let target = DVec3::new(anchor.x, refp[i].y, anchor.z);
-                m[(i, i)] += o.foot;
-                rhs[i] += o.foot * target;
-            }
-            for i in 0..n {
-                m[(i, i)] += o.anchor;
-                rhs[i] += o.anchor * refp[i];
-                if prev.is_some() {
-                    m[(i, i)] += o.temporal;
-                    rhs[i] += o.temporal * predicted[i];
-                }
-            }
-            let chol = Cholesky::new(m).ok_or_else(|| InteractionError::Solver {
+            let predicted = self.predicted(t, prev);
+            let system = self.system(t, o, &predicted, prev.is_some(), &mut work);
+            let chol = Cholesky::new(system.m).ok_or_else(|| InteractionError::Solver {
                 frame: t,
                 message: "system matrix is not positive definite".into(),
             })?;
-
-            // Local/global iterations.
-            let mut x = predicted;
-            let max_iter = if t == 0 {
-                4 * o.iterations
-            } else {
-                o.iterations
-            };
-            let mut b = DMatrix::<f64>::zeros(n, 3);
-            let mut used = 0;
-            for _ in 0..max_iter {
-                used += 1;
-                for i in 0..n {
-                    for c in 0..3 {
-                        b[(i, c)] = rhs[i][c];
-                    }
-                }
-                for r in &self.rods {
-                    let d = x[r.a] - x[r.b];
-                    let len = d.length();
-                    let dir = if len > 1e-12 { d / len } else { DVec3::Y };
-                    let p = o.rod * r.length * dir;
-                    for c in 0..3 {
-                        b[(r.a, c)] += p[c];
-                        b[(r.b, c)] -= p[c];
-                    }
-                }
-                for &(i, y) in &swing {
-                    // Projection onto {height >= y}: only a sole that sinks is held.
-                    let p = o.swing * DVec3::new(x[i].x, x[i].y.max(y), x[i].z);
-                    for c in 0..3 {
-                        b[(i, c)] += p[c];
-                    }
-                }
-                let sol = chol.solve(&b);
-                let mut moved = 0.0f64;
-                for (i, xi) in x.iter_mut().enumerate() {
-                    let v = DVec3::new(sol[(i, 0)], sol[(i, 1)], sol[(i, 2)]);
-                    moved = moved.max((v - *xi).length());
-                    *xi = v;
-                }
-                if !moved.is_finite() {
-                    return Err(InteractionError::Solver {
-                        frame: t,
-                        message: "positions became non-finite".into(),
-                    });
-                }
-                if moved < o.tolerance_m {
-                    break;
-                }
-            }
+            let (x, used) = self.iterate(t, o, &chol, &system.rhs, &work.swing, predicted)?;
             stats.iterations_total += used;
             stats.iterations_max = stats.iterations_max.max(used);
             for r in &self.rods {
@@ -351,6 +238,207 @@ impl Problem {
             out.extend_from_slice(&x);
         }
         Ok((out, stats))
+    }
+
+    /// Frame `t`'s starting point: the reference, or the previous solution
+    /// `prev` moved by the reference's motion.
+    fn predicted(&self, t: usize, prev: Option<&[DVec3]>) -> Vec<DVec3> {
+        let n = self.n();
+        let refp = &self.reference[t * n..(t + 1) * n];
+        match prev {
+            None => refp.to_vec(),
+            Some(p) => {
+                let r0 = &self.reference[(t - 1) * n..t * n];
+                (0..n).map(|i| p[i] + refp[i] - r0[i]).collect()
+            }
+        }
+    }
+
+    /// The normal equations of frame `t`'s energy without the rod and swing
+    /// projections (those change every iteration); `temporal`: there is a
+    /// previous frame to be smooth with.
+    fn system(
+        &self,
+        t: usize,
+        o: &SolverOptions,
+        predicted: &[DVec3],
+        temporal: bool,
+        work: &mut Work,
+    ) -> System {
+        let n = self.n();
+        let src = &self.source[t * n..(t + 1) * n];
+        let refp = &self.reference[t * n..(t + 1) * n];
+        let mut sys = System {
+            m: DMatrix::<f64>::zeros(n, n),
+            rhs: vec![DVec3::ZERO; n],
+        };
+        self.add_laplacian(&mut sys, src, refp, o, &mut work.neighbours);
+        for r in &self.rods {
+            sys.add_diff(r.a, r.b, o.rod);
+        }
+        for p in &self.pairs {
+            let w = o.key_pair * p.weight[t];
+            if w > 0.0 {
+                sys.add_diff(p.a, p.b, w);
+                let target = src[p.a] - src[p.b];
+                sys.rhs[p.a] += w * target;
+                sys.rhs[p.b] -= w * target;
+            }
+        }
+        self.add_feet(&mut sys, t, refp, predicted, o, work);
+        for i in 0..n {
+            sys.m[(i, i)] += o.anchor;
+            sys.rhs[i] += o.anchor * refp[i];
+            if temporal {
+                sys.m[(i, i)] += o.temporal;
+                sys.rhs[i] += o.temporal * predicted[i];
+            }
+        }
+        sys
+    }
+
+    /// Laplacian rows: `x_i - sum_j w_ij x_j = delta_i`, weighted more where
+    /// the partner is close.
+    fn add_laplacian(
+        &self,
+        sys: &mut System,
+        src: &[DVec3],
+        refp: &[DVec3],
+        o: &SolverOptions,
+        neighbours: &mut Vec<(usize, f64)>,
+    ) {
+        for i in 0..self.n() {
+            self.neighbours(src, i, o, neighbours);
+            if neighbours.is_empty() {
+                continue;
+            }
+            let other_min = neighbours
+                .iter()
+                .filter(|(j, _)| self.body(*j) != self.body(i))
+                .map(|(j, _)| (src[*j] - src[i]).length())
+                .fold(f64::INFINITY, f64::min);
+            let lam = o.laplacian
+                * (1.0 + o.close_boost * (-(other_min / o.close_radius_m).powi(2)).exp());
+            let mut delta = DVec3::ZERO;
+            for &(j, w) in neighbours.iter() {
+                let e = if self.body(j) == self.body(i) {
+                    refp[i] - refp[j]
+                } else {
+                    src[i] - src[j]
+                };
+                delta += w * e;
+            }
+            // row r: +1 at i, -w_j at j.
+            let mut row: Vec<(usize, f64)> = Vec::with_capacity(neighbours.len() + 1);
+            row.push((i, 1.0));
+            row.extend(neighbours.iter().map(|&(j, w)| (j, -w)));
+            for &(a, ca) in &row {
+                sys.rhs[a] += lam * ca * delta;
+                for &(b, cb) in &row {
+                    sys.m[(a, b)] += lam * ca * cb;
+                }
+            }
+        }
+    }
+
+    /// Planted sole points held at their contact anchor (set where a contact
+    /// starts), swinging ones listed in `work.swing` for the local step.
+    fn add_feet(
+        &self,
+        sys: &mut System,
+        t: usize,
+        refp: &[DVec3],
+        predicted: &[DVec3],
+        o: &SolverOptions,
+        work: &mut Work,
+    ) {
+        work.swing.clear();
+        for (f, anchor) in self.feet.iter().zip(work.anchors.iter_mut()) {
+            let i = f.point;
+            if !f.contact[t] {
+                // Swing: keep at least the reference clearance, so a body
+                // pulled down does not drag a swinging sole into ground contact
+                // while it still moves. Height only, one-sided: projected in
+                // the local step.
+                if o.swing > 0.0 {
+                    sys.m[(i, i)] += o.swing;
+                    work.swing.push((i, refp[i].y));
+                }
+                continue;
+            }
+            // A contact's horizontal target is fixed when it starts: holding
+            // the previous *solved* position instead lets the slip of every
+            // frame add up whenever other terms pull on the body.
+            if t == 0 || !f.contact[t - 1] {
+                *anchor = predicted[i];
+            }
+            let target = DVec3::new(anchor.x, refp[i].y, anchor.z);
+            sys.m[(i, i)] += o.foot;
+            sys.rhs[i] += o.foot * target;
+        }
+    }
+
+    /// Local/global iterations of frame `t` from `x` until no point moves more
+    /// than the tolerance; returns the positions and the iterations used.
+    fn iterate(
+        &self,
+        t: usize,
+        o: &SolverOptions,
+        chol: &Cholesky<f64, Dyn>,
+        rhs: &[DVec3],
+        swing: &[(usize, f64)],
+        mut x: Vec<DVec3>,
+    ) -> Result<(Vec<DVec3>, usize), InteractionError> {
+        let n = self.n();
+        let max_iter = if t == 0 {
+            4 * o.iterations
+        } else {
+            o.iterations
+        };
+        let mut b = DMatrix::<f64>::zeros(n, 3);
+        let mut used = 0;
+        for _ in 0..max_iter {
+            used += 1;
+            for i in 0..n {
+                for c in 0..3 {
+                    b[(i, c)] = rhs[i][c];
+                }
+            }
+            for r in &self.rods {
+                let d = x[r.a] - x[r.b];
+                let len = d.length();
+                let dir = if len > 1e-12 { d / len } else { DVec3::Y };
+                let p = o.rod * r.length * dir;
+                for c in 0..3 {
+                    b[(r.a, c)] += p[c];
+                    b[(r.b, c)] -= p[c];
+                }
+            }
+            for &(i, y) in swing {
+                // Projection onto {height >= y}: only a sole that sinks is held.
+                let p = o.swing * DVec3::new(x[i].x, x[i].y.max(y), x[i].z);
+                for c in 0..3 {
+                    b[(i, c)] += p[c];
+                }
+            }
+            let sol = chol.solve(&b);
+            let mut moved = 0.0f64;
+            for (i, xi) in x.iter_mut().enumerate() {
+                let v = DVec3::new(sol[(i, 0)], sol[(i, 1)], sol[(i, 2)]);
+                moved = moved.max((v - *xi).length());
+                *xi = v;
+            }
+            if !moved.is_finite() {
+                return Err(InteractionError::Solver {
+                    frame: t,
+                    message: "positions became non-finite".into(),
+                });
+            }
+            if moved < o.tolerance_m {
+                break;
+            }
+        }
+        Ok((x, used))
     }
 
     /// The weighted neighbours of point `i` in the source frame `src`.

@@ -17,6 +17,7 @@
 //! * AMC files carry no frame rate: the caller gives it (HDM05 and CMU capture
 //!   at 120 Hz, the `_120` in HDM05 file names; [`DEFAULT_FPS`]).
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use glam::{DQuat, DVec3};
@@ -39,24 +40,8 @@ struct BonePlan {
     dofs: Vec<Option<Axis>>,
 }
 
-/// Read an AMC motion from memory for the skeleton `asf`, at `fps` frames per
-/// second. `label` names the file in errors.
-pub fn parse(
-    bytes: &[u8],
-    label: impl AsRef<Path>,
-    asf: &Asf,
-    fps: f64,
-) -> Result<Motion, MotionError> {
-    let errors = Errors::new(label.as_ref());
-    if !(fps.is_finite() && fps > 0.0) {
-        return Err(errors
-            .whole(format!("frame rate {fps} is not a positive number"))
-            .into());
-    }
-    let skeleton = asf.skeleton();
-    let joints = skeleton.len();
-    let plans: Vec<BonePlan> = asf
-        .bones
+fn plans(asf: &Asf) -> Vec<BonePlan> {
+    asf.bones
         .iter()
         .enumerate()
         .map(|(b, bone)| BonePlan {
@@ -71,24 +56,27 @@ pub fn parse(
                 })
                 .collect(),
         })
-        .collect();
+        .collect()
+}
 
-    let by_name: std::collections::HashMap<Vec<u8>, usize> = asf
-        .bones
-        .iter()
-        .enumerate()
-        .map(|(b, bone)| (bone.name.as_bytes().to_ascii_lowercase(), b))
-        .collect();
-    let mut angle_rad = asf.angle_rad;
-    let mut root_translation: Vec<DVec3> = Vec::new();
-    let mut rotations: Vec<DQuat> = Vec::new();
-    let mut frame_number: Option<(i64, usize)> = None;
-    // Bones seen in the current frame (index into asf.bones, root = usize::MAX).
-    let mut seen: Vec<bool> = vec![false; asf.bones.len() + 1];
-    let mut axes: Vec<Axis> = Vec::with_capacity(3);
-    let mut angles: Vec<f64> = Vec::with_capacity(3);
-    let mut values: Vec<f64> = Vec::with_capacity(8);
-
+/// Read an AMC motion from memory for the skeleton `asf`, at `fps` frames per
+/// second. `label` names the file in errors.
+///
+/// Each line is a comment, a header keyword, a frame number (starting a frame
+/// at rest) or a bone line of the current frame.
+pub fn parse(
+    bytes: &[u8],
+    label: impl AsRef<Path>,
+    asf: &Asf,
+    fps: f64,
+) -> Result<Motion, MotionError> {
+    let errors = Errors::new(label.as_ref());
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(errors
+            .whole(format!("frame rate {fps} is not a positive number"))
+            .into());
+    }
+    let mut r = Reader::new(asf);
     for line in text::lines(bytes) {
         let mut toks = line.tokens();
         let Some(first) = toks.next() else { continue };
@@ -98,131 +86,216 @@ pub fn parse(
             continue;
         }
         if first.starts_with(b":") {
-            if frame_number.is_some() {
-                return Err(err(format!(
-                    "header keyword `{}` after the first frame",
-                    show(first)
-                )));
-            }
-            match first.to_ascii_uppercase().as_slice() {
-                b":DEGREES" => angle_rad = std::f64::consts::PI / 180.0,
-                b":RADIANS" => angle_rad = 1.0,
-                _ => {} // :FULLY-SPECIFIED and others change nothing here
-            }
+            r.header_keyword(first).map_err(err)?;
             continue;
         }
         // A frame number: a line holding one integer.
         if first.iter().all(|b| b.is_ascii_digit()) {
-            if let Some(extra) = toks.next() {
-                return Err(err(format!(
-                    "`{}` after frame number {} (a bone name cannot be a number)",
-                    show(extra),
-                    show(first)
-                )));
-            }
-            let number: i64 = std::str::from_utf8(first)
-                .ok()
-                .and_then(|s| s.parse().ok())
-                .ok_or_else(|| err(format!("frame number `{}` is too large", show(first))))?;
-            if let Some((prev, _)) = frame_number
-                && number != prev + 1
-            {
-                return Err(err(format!(
-                    "frame number {number} does not follow frame {prev}"
-                )));
-            }
-            frame_number = Some((number, n));
-            root_translation.push(asf.root.position);
-            rotations.extend(std::iter::repeat_n(DQuat::IDENTITY, joints));
-            seen.iter_mut().for_each(|s| *s = false);
+            r.frame_number(first, toks.next(), n).map_err(err)?;
             continue;
         }
-        if frame_number.is_none() {
-            return Err(err(format!(
+        r.bone_line(first, toks).map_err(err)?;
+    }
+    if r.root_translation.is_empty() {
+        return Err(errors.whole("no frames (no frame number lines)").into());
+    }
+    Motion::new(asf.skeleton().clone(), fps, r.root_translation, r.rotations)
+        .map_err(|e| errors.whole(e.to_string()).into())
+}
+
+/// The frames read so far; errors are messages for the current line.
+struct Reader<'a> {
+    asf: &'a Asf,
+    plans: Vec<BonePlan>,
+    by_name: HashMap<Vec<u8>, usize>,
+    /// Radians per angle unit: the ASF's, or `:DEGREES` / `:RADIANS`.
+    angle_rad: f64,
+    root_translation: Vec<DVec3>,
+    /// `[frame][joint]` flattened.
+    rotations: Vec<DQuat>,
+    /// The current frame number and its line.
+    frame_number: Option<(i64, usize)>,
+    /// Bones seen in the current frame (index into asf.bones, root = the last).
+    seen: Vec<bool>,
+    axes: Vec<Axis>,
+    angles: Vec<f64>,
+    values: Vec<f64>,
+}
+
+impl<'a> Reader<'a> {
+    fn new(asf: &'a Asf) -> Self {
+        let by_name = asf
+            .bones
+            .iter()
+            .enumerate()
+            .map(|(b, bone)| (bone.name.as_bytes().to_ascii_lowercase(), b))
+            .collect();
+        Reader {
+            asf,
+            plans: plans(asf),
+            by_name,
+            angle_rad: asf.angle_rad,
+            root_translation: Vec::new(),
+            rotations: Vec::new(),
+            frame_number: None,
+            seen: vec![false; asf.bones.len() + 1],
+            axes: Vec::with_capacity(3),
+            angles: Vec::with_capacity(3),
+            values: Vec::with_capacity(8),
+        }
+    }
+
+    /// `:DEGREES`, `:RADIANS`, `:FULLY-SPECIFIED`, ... before the first frame.
+    fn header_keyword(&mut self, first: &[u8]) -> Result<(), String> {
+        if self.frame_number.is_some() {
+            return Err(format!(
+                "header keyword `{}` after the first frame",
+                show(first)
+            ));
+        }
+        match first.to_ascii_uppercase().as_slice() {
+            b":DEGREES" => self.angle_rad = std::f64::consts::PI / 180.0,
+            b":RADIANS" => self.angle_rad = 1.0,
+            _ => {} // :FULLY-SPECIFIED and others change nothing here
+        }
+        Ok(())
+    }
+
+    /// A frame number line (`extra` is a second token, an error): starts a
+    /// frame with every bone at rest.
+    fn frame_number(&mut self, first: &[u8], extra: Option<&[u8]>, n: usize) -> Result<(), String> {
+        if let Some(extra) = extra {
+            return Err(format!(
+                "`{}` after frame number {} (a bone name cannot be a number)",
+                show(extra),
+                show(first)
+            ));
+        }
+        let number: i64 = std::str::from_utf8(first)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| format!("frame number `{}` is too large", show(first)))?;
+        if let Some((prev, _)) = self.frame_number
+            && number != prev + 1
+        {
+            return Err(format!(
+                "frame number {number} does not follow frame {prev}"
+            ));
+        }
+        self.frame_number = Some((number, n));
+        self.root_translation.push(self.asf.root.position);
+        self.rotations.extend(std::iter::repeat_n(
+            DQuat::IDENTITY,
+            self.asf.skeleton().len(),
+        ));
+        self.seen.iter_mut().for_each(|s| *s = false);
+        Ok(())
+    }
+
+    /// `name v1 v2 ..` of the root or a bone in the current frame.
+    fn bone_line<'t>(
+        &mut self,
+        first: &[u8],
+        toks: impl Iterator<Item = &'t [u8]>,
+    ) -> Result<(), String> {
+        if self.frame_number.is_none() {
+            return Err(format!(
                 "bone line `{}` before the first frame number",
                 show(first)
-            )));
+            ));
         }
-        values.clear();
+        self.values.clear();
         for (k, t) in toks.enumerate() {
-            values.push(text::number(t, &format!("{} value {}", show(first), k + 1)).map_err(err)?);
+            self.values.push(text::number(
+                t,
+                &format!("{} value {}", show(first), k + 1),
+            )?);
         }
-        let frame = root_translation.len() - 1;
         if first.eq_ignore_ascii_case(b"root") {
-            if seen[asf.bones.len()] {
-                return Err(err("`root` appears twice in one frame".into()));
-            }
-            seen[asf.bones.len()] = true;
-            let order = &asf.root.order;
-            if values.len() != order.len() {
-                return Err(err(format!(
-                    "root has {} values, its ASF order lists {}",
-                    values.len(),
-                    order.len()
-                )));
-            }
-            axes.clear();
-            angles.clear();
-            let mut position = asf.root.position;
-            for (d, v) in order.iter().zip(&values) {
-                match d {
-                    Dof::Translation(a) => position[a.index()] = v * asf.unit_m,
-                    Dof::Rotation(a) => {
-                        axes.push(*a);
-                        angles.push(v * angle_rad);
-                    }
-                    Dof::Length => {}
-                }
-            }
-            root_translation[frame] = position;
-            rotations[frame * joints] = local_rotation(asf.root.frame, &axes, &angles);
-            continue;
+            return self.root_values();
         }
-        let b = by_name
+        let asf = self.asf;
+        let b = self
+            .by_name
             .get(&first.to_ascii_lowercase())
             .copied()
-            .ok_or_else(|| err(format!("unknown bone `{}` (not in the ASF)", show(first))))?;
-        if seen[b] {
-            return Err(err(format!(
+            .ok_or_else(|| format!("unknown bone `{}` (not in the ASF)", show(first)))?;
+        if self.seen[b] {
+            return Err(format!(
                 "bone `{}` appears twice in one frame",
                 asf.bones[b].name
-            )));
+            ));
         }
-        seen[b] = true;
-        let plan = &plans[b];
-        if values.len() != plan.dofs.len() {
-            return Err(err(format!(
+        self.seen[b] = true;
+        let plan = &self.plans[b];
+        if self.values.len() != plan.dofs.len() {
+            return Err(format!(
                 "bone `{}` has {} values, its ASF dof lists {}",
                 asf.bones[b].name,
-                values.len(),
+                self.values.len(),
                 plan.dofs.len()
-            )));
+            ));
         }
-        axes.clear();
-        angles.clear();
-        for (d, v) in plan.dofs.iter().zip(&values) {
+        self.axes.clear();
+        self.angles.clear();
+        for (d, v) in plan.dofs.iter().zip(&self.values) {
             match d {
                 Some(a) => {
-                    axes.push(*a);
-                    angles.push(v * angle_rad);
+                    self.axes.push(*a);
+                    self.angles.push(v * self.angle_rad);
                 }
                 None if v.abs() > 1e-9 => {
-                    return Err(err(format!(
+                    return Err(format!(
                         "bone `{}` has a non-zero translation or length value {v}: only the \
                          root's position can be animated",
                         asf.bones[b].name
-                    )));
+                    ));
                 }
                 None => {}
             }
         }
-        rotations[frame * joints + plan.joint] = local_rotation(plan.frame, &axes, &angles);
+        let frame = self.root_translation.len() - 1;
+        let joints = asf.skeleton().len();
+        self.rotations[frame * joints + plan.joint] =
+            local_rotation(plan.frame, &self.axes, &self.angles);
+        Ok(())
     }
-    if root_translation.is_empty() {
-        return Err(errors.whole("no frames (no frame number lines)").into());
+
+    /// The root's values (in its ASF `order`) in the current frame.
+    fn root_values(&mut self) -> Result<(), String> {
+        let asf = self.asf;
+        let root_seen = asf.bones.len();
+        if self.seen[root_seen] {
+            return Err("`root` appears twice in one frame".into());
+        }
+        self.seen[root_seen] = true;
+        let order = &asf.root.order;
+        if self.values.len() != order.len() {
+            return Err(format!(
+                "root has {} values, its ASF order lists {}",
+                self.values.len(),
+                order.len()
+            ));
+        }
+        self.axes.clear();
+        self.angles.clear();
+        let mut position = asf.root.position;
+        for (d, v) in order.iter().zip(&self.values) {
+            match d {
+                Dof::Translation(a) => position[a.index()] = v * asf.unit_m,
+                Dof::Rotation(a) => {
+                    self.axes.push(*a);
+                    self.angles.push(v * self.angle_rad);
+                }
+                Dof::Length => {}
+            }
+        }
+        let frame = self.root_translation.len() - 1;
+        let joints = asf.skeleton().len();
+        self.root_translation[frame] = position;
+        self.rotations[frame * joints] = local_rotation(asf.root.frame, &self.axes, &self.angles);
+        Ok(())
     }
-    Motion::new(skeleton.clone(), fps, root_translation, rotations)
-        .map_err(|e| errors.whole(e.to_string()).into())
 }
 
 /// Read an AMC file from disk, see [`parse`].

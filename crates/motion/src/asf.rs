@@ -30,6 +30,10 @@
 //!
 //! Translation dofs on bones (`tx ty tz`, `l`) are read, and AMC frames must
 //! hold them at zero: the motion model animates only the root's position.
+//!
+//! [`parse`] runs in stages: the sections line by line as written
+//! (`sections`), the root and bones in metres and radians (here), then the
+//! joints in depth-first order (`joints`).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -42,8 +46,13 @@ use crate::error::ParseError;
 use crate::motion::Motion;
 #[cfg(test)]
 use crate::rotation;
-use crate::skeleton::{Axis, Channel, Joint, JointLimits, Skeleton};
-use crate::text::{self, Errors, Line, show};
+use crate::skeleton::{Axis, Skeleton};
+use crate::text::Errors;
+
+mod joints;
+mod sections;
+
+use sections::{RawAsf, RawBone};
 
 /// Metres per inch.
 const INCH_M: f64 = 0.0254;
@@ -182,408 +191,32 @@ fn frame_from(angles_xyz: [f64; 3], order: &[Axis]) -> DQuat {
     compose_applied_in_order(order, &angles)
 }
 
-/// A `:hierarchy` line: parent, children, line number.
-type HierarchyLine = (Vec<u8>, Vec<Vec<u8>>, usize);
-
-#[derive(Default)]
-struct RawBone {
-    line: usize,
-    name: Option<String>,
-    direction: Option<DVec3>,
-    length: Option<f64>,
-    axis: Option<([f64; 3], Vec<Axis>)>,
-    dofs: Vec<Dof>,
-    dof_line: usize,
-    limits: Vec<(f64, f64)>,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum Section {
-    Preamble,
-    Units,
-    Documentation,
-    Root,
-    BoneData,
-    Hierarchy,
-    Other,
-}
-
-/// Numbers of a `limits` entry: `(-160.0 20.0)`, `( -inf inf )`, ...
-fn limit_numbers(line: &Line) -> Vec<Vec<u8>> {
-    let cleaned: Vec<u8> = line
-        .bytes
-        .iter()
-        .map(|&b| if b == b'(' || b == b')' { b' ' } else { b })
-        .collect();
-    cleaned
-        .split(|b| b.is_ascii_whitespace())
-        .filter(|t| !t.is_empty())
-        .map(|t| t.to_vec())
-        .collect()
-}
-
-fn limit_value(token: &[u8]) -> Result<f64, String> {
-    match token.to_ascii_lowercase().as_slice() {
-        b"inf" | b"+inf" | b"infinity" => Ok(f64::INFINITY),
-        b"-inf" | b"-infinity" => Ok(f64::NEG_INFINITY),
-        _ => text::number(token, "limit"),
-    }
-}
-
 /// Read an ASF skeleton from memory; `label` names the file in errors.
+///
+/// Stages: the sections as written, the root and the bones in metres and
+/// radians, then the joints.
 pub fn parse(bytes: &[u8], label: impl AsRef<Path>) -> Result<Asf, MotionError> {
     let errors = Errors::new(label.as_ref());
-    let lines = text::lines(bytes);
-    let mut section = Section::Preamble;
-    let mut name = String::new();
-    let mut length_factor: Option<(f64, usize)> = None;
-    let mut angle_rad = std::f64::consts::PI / 180.0;
-    let mut root_order: Option<(Vec<Dof>, usize)> = None;
-    let mut root_axis: Vec<Axis> = vec![Axis::X, Axis::Y, Axis::Z];
-    let mut root_position = DVec3::ZERO;
-    let mut root_orientation = [0.0; 3];
-    let mut bones: Vec<RawBone> = Vec::new();
-    let mut in_bone = false;
-    let mut hierarchy: Vec<HierarchyLine> = Vec::new();
-    let mut hierarchy_open = false;
-    let mut seen_hierarchy = false;
-    // `limits` continuation: (bone index, values still expected).
-    let mut limits_pending: Option<(usize, usize)> = None;
+    let raw = sections::read(bytes, &errors)?;
+    let unit_m = INCH_M / raw.length_factor.map_or(1.0, |(f, _)| f);
+    let angle_rad = raw.angle_rad;
+    let root = finish_root(&raw, unit_m);
+    let bones = finish_bones(raw.bones, unit_m, angle_rad, &errors)?;
+    let (skeleton, joint_of_bone) = joints::build(&bones, &root, &raw.hierarchy, unit_m, &errors)?;
+    Ok(Asf {
+        name: raw.name,
+        unit_m,
+        angle_rad,
+        root,
+        bones,
+        skeleton: Arc::new(skeleton),
+        joint_of_bone,
+    })
+}
 
-    let mut i = 0;
-    while i < lines.len() {
-        let line = lines[i];
-        i += 1;
-        let toks: Vec<&[u8]> = line.tokens().collect();
-        let Some(&first) = toks.first() else { continue };
-        if first.starts_with(b"#") {
-            continue;
-        }
-        let n = line.number;
-        let err = |m: String| -> MotionError { errors.at(n, m).into() };
-
-        // Continuation lines of `limits`.
-        if let Some((b, remaining)) = limits_pending {
-            if first.starts_with(b"(") {
-                let nums = limit_numbers(&line);
-                let mut vals = Vec::new();
-                for t in &nums {
-                    vals.push(limit_value(t).map_err(err)?);
-                }
-                if vals.len() % 2 != 0 || vals.len() > remaining * 2 {
-                    return Err(err(format!(
-                        "limits of bone `{}`: expected pairs `(min max)`, one per dof",
-                        bones[b].name.clone().unwrap_or_default()
-                    )));
-                }
-                for p in vals.chunks(2) {
-                    bones[b].limits.push((p[0], p[1]));
-                }
-                let left = remaining - vals.len() / 2;
-                limits_pending = if left > 0 { Some((b, left)) } else { None };
-                continue;
-            }
-            let b = &bones[b];
-            return Err(err(format!(
-                "bone `{}` has {} dofs but only {} limits",
-                b.name.clone().unwrap_or_default(),
-                b.dofs.len(),
-                b.limits.len()
-            )));
-        }
-
-        if first.starts_with(b":") {
-            let key = first.to_ascii_lowercase();
-            if hierarchy_open {
-                return Err(err("`:hierarchy` block not closed with `end`".into()));
-            }
-            if in_bone {
-                return Err(err("bone block not closed with `end`".into()));
-            }
-            section = match key.as_slice() {
-                b":version" => Section::Other,
-                b":name" => {
-                    name = toks[1..]
-                        .iter()
-                        .map(|t| String::from_utf8_lossy(t).into_owned())
-                        .collect::<Vec<_>>()
-                        .join(" ");
-                    Section::Other
-                }
-                b":units" => Section::Units,
-                b":documentation" => Section::Documentation,
-                b":root" => Section::Root,
-                b":bonedata" => Section::BoneData,
-                b":hierarchy" => {
-                    seen_hierarchy = true;
-                    Section::Hierarchy
-                }
-                _ => Section::Other,
-            };
-            if toks.len() > 1 && !matches!(key.as_slice(), b":name" | b":version") {
-                return Err(err(format!(
-                    "unexpected `{}` after `{}`",
-                    show(toks[1]),
-                    show(first)
-                )));
-            }
-            continue;
-        }
-
-        let key = first.to_ascii_lowercase();
-        match section {
-            Section::Documentation | Section::Other => {}
-            Section::Preamble => {
-                return Err(err(format!(
-                    "`{}` before any `:section` keyword (is this an ASF file?)",
-                    show(first)
-                )));
-            }
-            Section::Units => match key.as_slice() {
-                b"length" => {
-                    let t = toks
-                        .get(1)
-                        .ok_or_else(|| err("`length` without a value".into()))?;
-                    let f = text::number(t, "length unit").map_err(err)?;
-                    if f <= 0.0 {
-                        return Err(err(format!("length unit {f} is not positive")));
-                    }
-                    length_factor = Some((f, n));
-                }
-                b"angle" => {
-                    let t = toks
-                        .get(1)
-                        .ok_or_else(|| err("`angle` without a value".into()))?;
-                    angle_rad = match t.to_ascii_lowercase().as_slice() {
-                        b"deg" | b"degree" | b"degrees" => std::f64::consts::PI / 180.0,
-                        b"rad" | b"radian" | b"radians" => 1.0,
-                        _ => {
-                            return Err(err(format!(
-                                "angle unit `{}` (expected deg or rad)",
-                                show(t)
-                            )));
-                        }
-                    };
-                }
-                _ => {} // mass and others do not matter here
-            },
-            Section::Root => {
-                let nums = |what: &str| -> Result<[f64; 3], MotionError> {
-                    if toks.len() < 4 {
-                        return Err(err(format!("`{what}` needs 3 numbers")));
-                    }
-                    let mut v = [0.0; 3];
-                    for k in 0..3 {
-                        v[k] = text::number(toks[k + 1], what).map_err(err)?;
-                    }
-                    Ok(v)
-                };
-                match key.as_slice() {
-                    b"order" => {
-                        let mut order = Vec::new();
-                        for t in &toks[1..] {
-                            let d =
-                                Dof::parse(t).filter(|d| *d != Dof::Length).ok_or_else(|| {
-                                    err(format!(
-                                        "root order: `{}` is not TX..TZ or RX..RZ",
-                                        show(t)
-                                    ))
-                                })?;
-                            if order.contains(&d) {
-                                return Err(err(format!("root order lists `{}` twice", show(t))));
-                            }
-                            order.push(d);
-                        }
-                        root_order = Some((order, n));
-                    }
-                    b"axis" => {
-                        let t = toks
-                            .get(1)
-                            .ok_or_else(|| err("root `axis` without an order".into()))?;
-                        root_axis = axis_order(t).ok_or_else(|| {
-                            err(format!("root axis `{}` is not an order like XYZ", show(t)))
-                        })?;
-                    }
-                    b"position" => root_position = DVec3::from_array(nums("root position")?),
-                    b"orientation" => root_orientation = nums("root orientation")?,
-                    _ => {
-                        return Err(err(format!("unknown root keyword `{}`", show(first))));
-                    }
-                }
-            }
-            Section::BoneData => {
-                if key == b"begin" {
-                    if in_bone {
-                        return Err(err("`begin` inside a bone (missing `end`)".into()));
-                    }
-                    in_bone = true;
-                    bones.push(RawBone {
-                        line: n,
-                        ..RawBone::default()
-                    });
-                    continue;
-                }
-                if !in_bone {
-                    return Err(err(format!(
-                        "`{}` outside a `begin` ... `end` bone block",
-                        show(first)
-                    )));
-                }
-                let bi = bones.len() - 1;
-                let bone = &mut bones[bi];
-                match key.as_slice() {
-                    b"end" => {
-                        in_bone = false;
-                        if bone.name.is_none() {
-                            return Err(err(format!(
-                                "bone starting on line {} has no `name`",
-                                bone.line
-                            )));
-                        }
-                    }
-                    b"id" | b"bodymass" | b"cofmass" => {}
-                    b"name" => {
-                        let t = toks
-                            .get(1)
-                            .ok_or_else(|| err("`name` without a value".into()))?;
-                        let s = String::from_utf8_lossy(t).into_owned();
-                        if s.eq_ignore_ascii_case("root") {
-                            return Err(err("a bone may not be called `root`".into()));
-                        }
-                        bone.name = Some(s);
-                    }
-                    b"direction" => {
-                        if toks.len() < 4 {
-                            return Err(err("`direction` needs 3 numbers".into()));
-                        }
-                        let mut v = [0.0; 3];
-                        for k in 0..3 {
-                            v[k] = text::number(toks[k + 1], "direction").map_err(err)?;
-                        }
-                        bone.direction = Some(DVec3::from_array(v));
-                    }
-                    b"length" => {
-                        let t = toks
-                            .get(1)
-                            .ok_or_else(|| err("`length` without a value".into()))?;
-                        let l = text::number(t, "bone length").map_err(err)?;
-                        if l < 0.0 {
-                            return Err(err(format!("bone length {l} is negative")));
-                        }
-                        bone.length = Some(l);
-                    }
-                    b"axis" => {
-                        if toks.len() < 5 {
-                            return Err(err("`axis` needs 3 angles and an order like XYZ".into()));
-                        }
-                        let mut v = [0.0; 3];
-                        for k in 0..3 {
-                            v[k] = text::number(toks[k + 1], "axis angle").map_err(err)?;
-                        }
-                        let order = axis_order(toks[4]).ok_or_else(|| {
-                            err(format!("axis order `{}` is not like XYZ", show(toks[4])))
-                        })?;
-                        bone.axis = Some((v, order));
-                    }
-                    b"dof" => {
-                        let mut dofs = Vec::new();
-                        for t in &toks[1..] {
-                            let d = Dof::parse(t).ok_or_else(|| {
-                                err(format!("`{}` is not a dof (rx ry rz tx ty tz l)", show(t)))
-                            })?;
-                            if dofs.contains(&d) {
-                                return Err(err(format!("dof `{}` listed twice", show(t))));
-                            }
-                            dofs.push(d);
-                        }
-                        bone.dofs = dofs;
-                        bone.dof_line = n;
-                    }
-                    b"limits" => {
-                        if bone.dofs.is_empty() {
-                            return Err(err("`limits` before (or without) `dof`".into()));
-                        }
-                        let mut vals = Vec::new();
-                        for t in limit_numbers(&line).iter().skip(1) {
-                            vals.push(limit_value(t).map_err(err)?);
-                        }
-                        if vals.len() % 2 != 0 || vals.len() > bone.dofs.len() * 2 {
-                            return Err(err(
-                                "limits: expected pairs `(min max)`, one per dof".into()
-                            ));
-                        }
-                        bone.limits.clear();
-                        for p in vals.chunks(2) {
-                            bone.limits.push((p[0], p[1]));
-                        }
-                        let left = bone.dofs.len() - bone.limits.len();
-                        if left > 0 {
-                            limits_pending = Some((bi, left));
-                        }
-                    }
-                    _ => {
-                        return Err(err(format!("unknown bone keyword `{}`", show(first))));
-                    }
-                }
-            }
-            Section::Hierarchy => {
-                if key == b"begin" {
-                    hierarchy_open = true;
-                    continue;
-                }
-                if key == b"end" {
-                    hierarchy_open = false;
-                    section = Section::Other;
-                    continue;
-                }
-                if !hierarchy_open {
-                    return Err(err(format!(
-                        "`{}` before `begin` in `:hierarchy`",
-                        show(first)
-                    )));
-                }
-                if toks.len() < 2 {
-                    return Err(err(format!(
-                        "bone `{}` listed without children",
-                        show(first)
-                    )));
-                }
-                hierarchy.push((
-                    first.to_vec(),
-                    toks[1..].iter().map(|t| t.to_vec()).collect(),
-                    n,
-                ));
-            }
-        }
-    }
-    let last_line = lines.last().map_or(1, |l| l.number);
-    if let Some((b, _)) = limits_pending {
-        return Err(errors
-            .at(
-                last_line,
-                format!(
-                    "file ends inside the limits of bone `{}`",
-                    bones[b].name.clone().unwrap_or_default()
-                ),
-            )
-            .into());
-    }
-    if in_bone {
-        return Err(errors
-            .at(last_line, "file ends inside a bone block (missing `end`)")
-            .into());
-    }
-    if hierarchy_open {
-        return Err(errors
-            .at(last_line, "file ends inside `:hierarchy` (missing `end`)")
-            .into());
-    }
-    if !seen_hierarchy && !bones.is_empty() {
-        return Err(errors.whole("no `:hierarchy` section").into());
-    }
-
-    let unit_m = INCH_M / length_factor.map_or(1.0, |(f, _)| f);
-    let root_order = root_order.map_or_else(
+/// The root in metres and radians; without `order`, `TX TY TZ RX RY RZ`.
+fn finish_root(raw: &RawAsf, unit_m: f64) -> AsfRoot {
+    let order = raw.root_order.clone().map_or_else(
         || {
             vec![
                 Dof::Translation(Axis::X),
@@ -596,16 +229,27 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>) -> Result<Asf, MotionError> 
         },
         |(o, _)| o,
     );
-    let root = AsfRoot {
-        order: root_order,
-        position: root_position * unit_m,
-        frame: frame_from(root_orientation.map(|a| a * angle_rad), &root_axis),
-    };
+    AsfRoot {
+        order,
+        position: raw.root_position * unit_m,
+        frame: frame_from(
+            raw.root_orientation.map(|a| a * raw.angle_rad),
+            &raw.root_axis,
+        ),
+    }
+}
 
-    // Finish the bones.
-    let mut out_bones = Vec::with_capacity(bones.len());
+/// Each bone checked (unique name, `direction`, `length`, one limit per dof)
+/// and converted to metres and radians.
+fn finish_bones(
+    raw: Vec<RawBone>,
+    unit_m: f64,
+    angle_rad: f64,
+    errors: &Errors,
+) -> Result<Vec<AsfBone>, MotionError> {
+    let mut out_bones = Vec::with_capacity(raw.len());
     let mut seen_names = std::collections::HashSet::new();
-    for b in bones {
+    for b in raw {
         let name = b.name.unwrap_or_default();
         let at = |m: String| -> MotionError { errors.at(b.line, m).into() };
         if !seen_names.insert(name.to_ascii_lowercase()) {
@@ -659,166 +303,7 @@ pub fn parse(bytes: &[u8], label: impl AsRef<Path>) -> Result<Asf, MotionError> 
             line: b.line,
         });
     }
-
-    let (skeleton, joint_of_bone) = build_skeleton(&out_bones, &root, &hierarchy, unit_m, &errors)?;
-    Ok(Asf {
-        name,
-        unit_m,
-        angle_rad,
-        root,
-        bones: out_bones,
-        skeleton: Arc::new(skeleton),
-        joint_of_bone,
-    })
-}
-
-/// Joints in depth-first order following `:hierarchy` (children in listed order).
-fn build_skeleton(
-    bones: &[AsfBone],
-    root: &AsfRoot,
-    hierarchy: &[HierarchyLine],
-    unit_m: f64,
-    errors: &Errors,
-) -> Result<(Skeleton, Vec<usize>), MotionError> {
-    // Node 0 is the root, node b + 1 is bone b.
-    let by_name: std::collections::HashMap<Vec<u8>, usize> = bones
-        .iter()
-        .enumerate()
-        .map(|(b, bone)| (bone.name.as_bytes().to_ascii_lowercase(), b + 1))
-        .collect();
-    let node = |name: &[u8]| -> Option<usize> {
-        if name.eq_ignore_ascii_case(b"root") {
-            Some(0)
-        } else {
-            by_name.get(&name.to_ascii_lowercase()).copied()
-        }
-    };
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); bones.len() + 1];
-    let mut parent_line: Vec<Option<usize>> = vec![None; bones.len() + 1];
-    for (parent, kids, line) in hierarchy {
-        let p = node(parent).ok_or_else(|| {
-            errors.at(
-                *line,
-                format!("`{}` in :hierarchy is not a bone", show(parent)),
-            )
-        })?;
-        for k in kids {
-            let c = node(k).ok_or_else(|| {
-                errors.at(*line, format!("`{}` in :hierarchy is not a bone", show(k)))
-            })?;
-            if c == 0 {
-                return Err(errors.at(*line, "the root cannot be a child").into());
-            }
-            if let Some(prev) = parent_line[c] {
-                return Err(errors
-                    .at(
-                        *line,
-                        format!("bone `{}` already has a parent (line {prev})", show(k)),
-                    )
-                    .into());
-            }
-            parent_line[c] = Some(*line);
-            children[p].push(c);
-        }
-    }
-    let rotations = [
-        Channel::Rotation(Axis::Z),
-        Channel::Rotation(Axis::Y),
-        Channel::Rotation(Axis::X),
-    ];
-    let mut joints = Vec::with_capacity(bones.len() + 1);
-    let mut joint_of_node = vec![usize::MAX; bones.len() + 1];
-    // Depth-first, iterative: (node, parent node).
-    let mut stack: Vec<(usize, Option<usize>)> = vec![(0, None)];
-    while let Some((nd, parent_node)) = stack.pop() {
-        let parent_joint = parent_node.map(|p| joint_of_node[p]);
-        if joint_of_node[nd] != usize::MAX {
-            // Cannot happen with one parent per bone, but never loop.
-            continue;
-        }
-        let index = joints.len();
-        joint_of_node[nd] = index;
-        let leaf = children[nd].is_empty();
-        let joint = if nd == 0 {
-            let mut channels = vec![
-                Channel::Position(Axis::X),
-                Channel::Position(Axis::Y),
-                Channel::Position(Axis::Z),
-            ];
-            channels.extend(rotations);
-            Joint {
-                name: "root".into(),
-                parent: None,
-                offset: root.position,
-                channels,
-                end_site: None,
-                limits: None,
-            }
-        } else {
-            let bone = &bones[nd - 1];
-            // Offset: the parent bone's vector (0 for children of the root).
-            let offset = match parent_node {
-                Some(p) if p > 0 => bones[p - 1].direction * bones[p - 1].length,
-                _ => DVec3::ZERO,
-            };
-            let rot_dofs: Vec<(Axis, f64, f64)> = bone
-                .dofs
-                .iter()
-                .enumerate()
-                .filter_map(|(k, d)| match d {
-                    Dof::Rotation(a) => {
-                        let (lo, hi) = bone
-                            .limits
-                            .get(k)
-                            .copied()
-                            .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
-                        Some((*a, lo, hi))
-                    }
-                    _ => None,
-                })
-                .rev()
-                .collect();
-            let limits = if bone.limits.is_empty() {
-                None
-            } else {
-                Some(JointLimits {
-                    frame: bone.frame,
-                    dofs: rot_dofs,
-                })
-            };
-            Joint {
-                name: bone.name.clone(),
-                parent: parent_joint,
-                offset,
-                channels: rotations.to_vec(),
-                end_site: if leaf {
-                    Some(bone.direction * bone.length)
-                } else {
-                    None
-                },
-                limits,
-            }
-        };
-        joints.push(joint);
-        for &c in children[nd].iter().rev() {
-            stack.push((c, Some(nd)));
-        }
-    }
-    if let Some(b) = (1..=bones.len()).find(|&nd| joint_of_node[nd] == usize::MAX) {
-        let bone = &bones[b - 1];
-        return Err(errors
-            .at(
-                bone.line,
-                format!(
-                    "bone `{}` is not connected to the root in :hierarchy",
-                    bone.name
-                ),
-            )
-            .into());
-    }
-    let joint_of_bone = (1..=bones.len()).map(|nd| joint_of_node[nd]).collect();
-    let skeleton = Skeleton::new(joints, unit_m).map_err(|e| errors.whole(e.to_string()))?;
-    Ok((skeleton, joint_of_bone))
+    Ok(out_bones)
 }
 
 /// Read an ASF file from disk, see [`parse`].

@@ -176,6 +176,15 @@ pub struct ImitationEnv {
     record: bool,
 }
 
+/// What the physics substeps of one control step did.
+struct Substeps {
+    /// Mean |F| and |tau| of the root residual over the substeps.
+    mean_force: f32,
+    mean_torque: f32,
+    /// A non-foot body touched the ground (see [`ImitationEnv::step`]).
+    fell: bool,
+}
+
 fn heading_of(rot: Quat, forward: Vec3, heading0: f32) -> Quat {
     let f = rot * forward;
     let yaw = f.x.atan2(f.z) - heading0;
@@ -360,6 +369,10 @@ impl ImitationEnv {
     }
 
     /// One control step. The new observation is in [`ImitationEnv::obs`].
+    ///
+    /// Stages: the action's residual rotations, the root residual force, the
+    /// physics substeps towards reference frame `k + 1`, then the recording,
+    /// observation and reward of the new frame.
     pub fn step(&mut self, action: &[f32]) -> Result<StepResult, PhysicsError> {
         let expected = self.act_dim();
         if action.len() != expected {
@@ -368,7 +381,6 @@ impl ImitationEnv {
                 expected,
             });
         }
-        let n = self.spec.bodies.len();
         let k = self.frame;
         if k + 1 >= self.reference.len() {
             return Ok(StepResult {
@@ -381,7 +393,21 @@ impl ImitationEnv {
                 ..Default::default()
             });
         }
-        for b in 1..n {
+        self.read_action(action);
+        let (force, torque) = self.root_residual(action, k);
+        let run = self.run_substeps(k, force, torque);
+        self.frame = k + 1;
+        if self.record {
+            self.push_record();
+        }
+        self.write_obs();
+        Ok(self.step_result(&run))
+    }
+
+    /// The residual rotation of every non-root body (non-finite values are 0).
+    #[inline]
+    fn read_action(&mut self, action: &[f32]) {
+        for b in 1..self.spec.bodies.len() {
             let a = Vec3::new(
                 action[3 * (b - 1)],
                 action[3 * (b - 1) + 1],
@@ -390,10 +416,14 @@ impl ImitationEnv {
             let a = if a.is_finite() { a } else { Vec3::ZERO };
             self.action_rot[b] = exp_map(a);
         }
+    }
 
-        // Root residual force, once per control step.
+    /// Root residual force and torque, once per control step at frame `k`.
+    #[inline]
+    fn root_residual(&self, action: &[f32], k: usize) -> (Vec3, Vec3) {
+        let n = self.spec.bodies.len();
         let root = self.sim.state[0];
-        let (force, torque) = match self.config.residual {
+        match self.config.residual {
             Residual::None => (Vec3::ZERO, Vec3::ZERO),
             Residual::Pd => self.pd_residual(&self.reference.frames[k].bodies[0], &root),
             Residual::Learned => {
@@ -406,42 +436,23 @@ impl ImitationEnv {
                 let t = if t.is_finite() { t } else { Vec3::ZERO };
                 (h * (f * s), h * (t * s))
             }
-        };
+        }
+    }
 
+    /// The physics substeps from reference frame `k` towards `k + 1`, starting
+    /// with the root residual `force`, `torque`.
+    #[inline]
+    fn run_substeps(&mut self, k: usize, force: Vec3, torque: Vec3) -> Substeps {
         let (mut force, mut torque) = (force, torque);
         let (mut sum_f, mut sum_t) = (0.0f32, 0.0f32);
         let mut fell = false;
         let inv = 1.0 / self.substeps as f32;
         for sub in 0..self.substeps {
             let alpha = sub as f32 * inv;
-            let (f0, f1) = (&self.reference.frames[k], &self.reference.frames[k + 1]);
-            for b in 1..n {
-                let mut r = f1.rel[b];
-                if f0.rel[b].dot(r) < 0.0 {
-                    r = -r;
-                }
-                let q_ref = f0.rel[b].slerp(r, alpha);
-                let mut t = q_ref * self.action_rot[b];
-                if let Some(h) = &self.spec.bodies[b].hinge {
-                    t = clamp_hinge(t, h, q_ref);
-                }
-                self.targets[b] = t;
-                self.target_vel[b] = f0.rel_vel[b].lerp(f1.rel_vel[b], alpha);
-            }
+            self.set_targets(k, alpha);
             if sub > 0 && self.config.residual == Residual::Pd && self.config.residual_every_substep
             {
-                let (f0, f1) = (
-                    &self.reference.frames[k].bodies[0],
-                    &self.reference.frames[k + 1].bodies[0],
-                );
-                let r = BodyState {
-                    pos: f0.pos.lerp(f1.pos, alpha),
-                    rot: f0.rot.slerp(f1.rot, alpha),
-                    vel: f0.vel.lerp(f1.vel, alpha),
-                    angvel: f0.angvel.lerp(f1.angvel, alpha),
-                };
-                let root = self.sim.state[0];
-                (force, torque) = self.pd_residual(&r, &root);
+                (force, torque) = self.interpolated_pd_residual(k, alpha);
             }
             sum_f += force.length();
             sum_t += torque.length();
@@ -451,16 +462,60 @@ impl ImitationEnv {
                 fell = self.fallen(k + 1);
             }
         }
-        self.frame = k + 1;
-        if self.record {
-            self.push_record();
+        Substeps {
+            mean_force: sum_f * inv,
+            mean_torque: sum_t * inv,
+            fell,
         }
-        self.write_obs();
+    }
+
+    /// PD targets between reference frames `k` and `k + 1` (`alpha` in [0, 1)):
+    /// the reference relative rotation times the action, hinge-clamped.
+    #[inline]
+    fn set_targets(&mut self, k: usize, alpha: f32) {
+        let (f0, f1) = (&self.reference.frames[k], &self.reference.frames[k + 1]);
+        for b in 1..self.spec.bodies.len() {
+            let mut r = f1.rel[b];
+            if f0.rel[b].dot(r) < 0.0 {
+                r = -r;
+            }
+            let q_ref = f0.rel[b].slerp(r, alpha);
+            let mut t = q_ref * self.action_rot[b];
+            if let Some(h) = &self.spec.bodies[b].hinge {
+                t = clamp_hinge(t, h, q_ref);
+            }
+            self.targets[b] = t;
+            self.target_vel[b] = f0.rel_vel[b].lerp(f1.rel_vel[b], alpha);
+        }
+    }
+
+    /// The PD residual against the reference root interpolated between frames
+    /// `k` and `k + 1`.
+    #[inline]
+    fn interpolated_pd_residual(&self, k: usize, alpha: f32) -> (Vec3, Vec3) {
+        let (f0, f1) = (
+            &self.reference.frames[k].bodies[0],
+            &self.reference.frames[k + 1].bodies[0],
+        );
+        let r = BodyState {
+            pos: f0.pos.lerp(f1.pos, alpha),
+            rot: f0.rot.slerp(f1.rot, alpha),
+            vel: f0.vel.lerp(f1.vel, alpha),
+            angvel: f0.angvel.lerp(f1.angvel, alpha),
+        };
+        let root = self.sim.state[0];
+        self.pd_residual(&r, &root)
+    }
+
+    /// Reward and flags of the step that ended at the current frame (the
+    /// observation already written; non-finite values in it are zeroed).
+    #[inline]
+    fn step_result(&mut self, run: &Substeps) -> StepResult {
         let r_imit = self.imitation_reward();
         let r_res = match self.config.residual {
             Residual::None => 1.0,
             _ => {
-                let (f, t) = (sum_f * inv, sum_t * inv);
+                let (f, t) = (run.mean_force, run.mean_torque);
                 (-0.01 * (f * f + t * t).sqrt()).exp()
             }
         };
@@ -471,6 +526,7 @@ impl ImitationEnv {
                 broken = true;
             }
         }
+        let fell = run.fell;
         let (reward, r_imit) = if fell || broken || !r_imit.is_finite() {
             (0.0, 0.0)
         } else {
@@ -478,19 +534,19 @@ impl ImitationEnv {
         };
         let terminated = fell || broken;
         let truncated = !terminated && self.frame + 1 >= self.reference.len();
-        Ok(StepResult {
+        StepResult {
             reward,
             r_imit,
             done: terminated || truncated,
             terminated,
             truncated,
             info: StepInfo {
-                residual_force: sum_f * inv,
-                residual_torque: sum_t * inv,
+                residual_force: run.mean_force,
+                residual_torque: run.mean_torque,
                 fell,
                 frame: self.frame,
             },
-        })
+        }
     }
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.

@@ -164,119 +164,22 @@ pub(crate) fn axis_angle(q: Quat) -> Vec3 {
 }
 
 impl Sim {
+    /// The world of `spec`: the ground, then each body with its collider and
+    /// the joint to its parent, then the subtree inertias.
     pub fn new(spec: &CharacterSpec, params: SimParams) -> Self {
         let n = spec.bodies.len();
-        let mut world = PhysicsWorld::new();
-        world.gravity = Vector::new(0.0, -params.gravity, 0.0);
-        world.integration_parameters.dt = params.dt;
-        world.integration_parameters.num_solver_iterations = params.solver_iterations.max(1);
-        world
-            .integration_parameters
-            .num_internal_stabilization_iterations = params.stabilization_iterations;
-
-        let ground_body =
-            world.insert_body(RigidBodyBuilder::fixed().translation(Vector::new(0.0, -1.0, 0.0)));
-        let ground_bit = Group::from_bits_truncate(1 << 31);
-        let ground = world.insert_collider(
-            ColliderBuilder::cuboid(100.0, 1.0, 100.0)
-                .friction(params.friction)
-                .collision_groups(InteractionGroups::new(
-                    ground_bit,
-                    Group::ALL,
-                    InteractionTestMode::And,
-                )),
-            Some(ground_body),
-        );
-
+        let mut world = world(&params);
+        let ground = insert_ground(&mut world, &params);
         let mut bodies = Vec::with_capacity(n);
         let mut joints = Vec::with_capacity(n);
         let mut colliders = Vec::with_capacity(n);
-        for (b, body) in spec.bodies.iter().enumerate() {
-            let rb = world.insert_body(
-                RigidBodyBuilder::dynamic()
-                    .translation(body.rest_origin + Vec3::Y * 2.0)
-                    .can_sleep(false),
-            );
-            let mut filter = Group::ALL.bits();
-            for &(a, c) in &spec.no_collision {
-                if a == b {
-                    filter &= !(1u32 << c);
-                } else if c == b {
-                    filter &= !(1u32 << a);
-                }
-            }
-            let (shape, local) = body.shape.to_parry();
-            let mut mprops = shape.mass_properties(1.0);
-            mprops.set_mass(body.mass, true);
-            if params.min_inertia > 0.0 {
-                let inv = mprops.inv_principal_inertia;
-                let clamp = |i: f32| {
-                    if i > 0.0 {
-                        i.min(1.0 / params.min_inertia)
-                    } else {
-                        i
-                    }
-                };
-                mprops.inv_principal_inertia = Vec3::new(clamp(inv.x), clamp(inv.y), clamp(inv.z));
-            }
-            let col = world.insert_collider(
-                ColliderBuilder::new(shape)
-                    .position(local)
-                    .mass_properties(mprops)
-                    .friction(params.friction)
-                    .collision_groups(InteractionGroups::new(
-                        Group::from_bits_truncate(1 << b),
-                        Group::from_bits_truncate(filter),
-                        InteractionTestMode::And,
-                    )),
-                Some(rb),
-            );
-            joints.push(body.parent.map(|p| {
-                let mut joint = SphericalJointBuilder::new()
-                    .local_anchor1(body.anchor_in_parent)
-                    .local_anchor2(Vec3::ZERO)
-                    .contacts_enabled(false);
-                if params.pd == PdMode::Motor {
-                    for axis in [JointAxis::AngX, JointAxis::AngY, JointAxis::AngZ] {
-                        joint = joint
-                            .motor_model(axis, MotorModel::ForceBased)
-                            .motor_velocity(axis, 0.0, body.kd)
-                            .motor_max_force(axis, body.torque_limit);
-                    }
-                }
-                world.insert_impulse_joint(bodies[p], rb, joint)
-            }));
+        for b in 0..n {
+            let (rb, col, joint) = insert_body(&mut world, spec, b, &bodies, &params);
+            joints.push(joint);
             bodies.push(rb);
             colliders.push(col);
         }
-
-        // Subtree inertia about each joint, rest pose.
-        let mut subtree_inertia = vec![Mat3::ZERO; n];
-        #[allow(clippy::needless_range_loop)]
-        for b in 0..n {
-            let pivot = spec.bodies[b].rest_origin;
-            let mut total = Mat3::ZERO;
-            for k in 0..n {
-                let mut at = Some(k);
-                let mut inside = false;
-                while let Some(a) = at {
-                    if a == b {
-                        inside = true;
-                        break;
-                    }
-                    at = spec.bodies[a].parent;
-                }
-                if !inside {
-                    continue;
-                }
-                let mp = world.bodies[bodies[k]].mass_properties().local_mprops;
-                let ic = mp.reconstruct_inertia_matrix();
-                let m = mp.mass();
-                let d = spec.bodies[k].rest_origin + mp.local_com - pivot;
-                total += ic + (Mat3::IDENTITY * d.length_squared() - outer(d, d)) * m;
-            }
-            subtree_inertia[b] = total;
-        }
+        let subtree_inertia = subtree_inertia(spec, &world, &bodies);
         Sim {
             world,
             bodies,
@@ -427,6 +330,139 @@ impl Sim {
             .contact_pair(self.ground, self.colliders[b])
             .is_some_and(|c| c.has_any_active_contact())
     }
+}
+
+/// An empty world with the step, gravity and solver settings of `params`.
+fn world(params: &SimParams) -> PhysicsWorld {
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(0.0, -params.gravity, 0.0);
+    world.integration_parameters.dt = params.dt;
+    world.integration_parameters.num_solver_iterations = params.solver_iterations.max(1);
+    world
+        .integration_parameters
+        .num_internal_stabilization_iterations = params.stabilization_iterations;
+    world
+}
+
+/// The ground: a fixed box whose top is y = 0, in collision group 31.
+fn insert_ground(world: &mut PhysicsWorld, params: &SimParams) -> ColliderHandle {
+    let ground_body =
+        world.insert_body(RigidBodyBuilder::fixed().translation(Vector::new(0.0, -1.0, 0.0)));
+    let ground_bit = Group::from_bits_truncate(1 << 31);
+    world.insert_collider(
+        ColliderBuilder::cuboid(100.0, 1.0, 100.0)
+            .friction(params.friction)
+            .collision_groups(InteractionGroups::new(
+                ground_bit,
+                Group::ALL,
+                InteractionTestMode::And,
+            )),
+        Some(ground_body),
+    )
+}
+
+/// Body `b` of `spec` (its parent already in `bodies`): the rigid body, its
+/// collider (group `b`, not colliding with the excluded pairs) and, but for the
+/// pelvis, the spherical joint to its parent (with motors in [`PdMode::Motor`]).
+fn insert_body(
+    world: &mut PhysicsWorld,
+    spec: &CharacterSpec,
+    b: usize,
+    bodies: &[RigidBodyHandle],
+    params: &SimParams,
+) -> (RigidBodyHandle, ColliderHandle, Option<ImpulseJointHandle>) {
+    let body = &spec.bodies[b];
+    let rb = world.insert_body(
+        RigidBodyBuilder::dynamic()
+            .translation(body.rest_origin + Vec3::Y * 2.0)
+            .can_sleep(false),
+    );
+    let mut filter = Group::ALL.bits();
+    for &(a, c) in &spec.no_collision {
+        if a == b {
+            filter &= !(1u32 << c);
+        } else if c == b {
+            filter &= !(1u32 << a);
+        }
+    }
+    let (shape, local) = body.shape.to_parry();
+    let mut mprops = shape.mass_properties(1.0);
+    mprops.set_mass(body.mass, true);
+    if params.min_inertia > 0.0 {
+        let inv = mprops.inv_principal_inertia;
+        let clamp = |i: f32| {
+            if i > 0.0 {
+                i.min(1.0 / params.min_inertia)
+            } else {
+                i
+            }
+        };
+        mprops.inv_principal_inertia = Vec3::new(clamp(inv.x), clamp(inv.y), clamp(inv.z));
+    }
+    let col = world.insert_collider(
+        ColliderBuilder::new(shape)
+            .position(local)
+            .mass_properties(mprops)
+            .friction(params.friction)
+            .collision_groups(InteractionGroups::new(
+                Group::from_bits_truncate(1 << b),
+                Group::from_bits_truncate(filter),
+                InteractionTestMode::And,
+            )),
+        Some(rb),
+    );
+    let joint = body.parent.map(|p| {
+        let mut joint = SphericalJointBuilder::new()
+            .local_anchor1(body.anchor_in_parent)
+            .local_anchor2(Vec3::ZERO)
+            .contacts_enabled(false);
+        if params.pd == PdMode::Motor {
+            for axis in [JointAxis::AngX, JointAxis::AngY, JointAxis::AngZ] {
+                joint = joint
+                    .motor_model(axis, MotorModel::ForceBased)
+                    .motor_velocity(axis, 0.0, body.kd)
+                    .motor_max_force(axis, body.torque_limit);
+            }
+        }
+        world.insert_impulse_joint(bodies[p], rb, joint)
+    });
+    (rb, col, joint)
+}
+
+/// Rest inertia of each body's subtree about its joint (rest frame = world).
+fn subtree_inertia(
+    spec: &CharacterSpec,
+    world: &PhysicsWorld,
+    bodies: &[RigidBodyHandle],
+) -> Vec<Mat3> {
+    let n = spec.bodies.len();
+    let mut subtree_inertia = vec![Mat3::ZERO; n];
+    #[allow(clippy::needless_range_loop)]
+    for b in 0..n {
+        let pivot = spec.bodies[b].rest_origin;
+        let mut total = Mat3::ZERO;
+        for k in 0..n {
+            let mut at = Some(k);
+            let mut inside = false;
+            while let Some(a) = at {
+                if a == b {
+                    inside = true;
+                    break;
+                }
+                at = spec.bodies[a].parent;
+            }
+            if !inside {
+                continue;
+            }
+            let mp = world.bodies[bodies[k]].mass_properties().local_mprops;
+            let ic = mp.reconstruct_inertia_matrix();
+            let m = mp.mass();
+            let d = spec.bodies[k].rest_origin + mp.local_com - pivot;
+            total += ic + (Mat3::IDENTITY * d.length_squared() - outer(d, d)) * m;
+        }
+        subtree_inertia[b] = total;
+    }
+    subtree_inertia
 }
 
 fn outer(a: Vec3, b: Vec3) -> Mat3 {

@@ -172,6 +172,10 @@ fn arc(from: DVec3, to: DVec3) -> DQuat {
 /// Solve one frame. `x` are the frame's world transforms (from FK of `pose`),
 /// `pose` its local rotations, edited in place. `original` are the source local
 /// rotations (for widening limits).
+///
+/// Stages (see the module docs): the frame's geometry and preferred bend
+/// plane, the solution in that plane, the swivel search when it breaks a
+/// limit, the clamp and re-bend when no swivel helps.
 pub fn solve_frame(
     skeleton: &Skeleton,
     limb: &Limb,
@@ -181,58 +185,153 @@ pub fn solve_frame(
     target: DVec3,
     options: SolveOptions,
 ) -> FrameEdit {
-    let SolveOptions {
-        orientation,
-        respect_limits,
-    } = options;
-    let (h, k, e) = limb.points(x);
-    let (l1, l2) = ((k - h).length(), (e - k).length());
-    let thigh = k - h;
-    let shin = e - k;
-    // Reference bend normal of this frame.
-    let m = thigh.cross(shin);
-    let p_lower = skeleton.parent(limb.lower).unwrap_or(0);
-    let n_ref = if m.length() > 1e-6 * l1 * l2 {
-        m.normalize()
-    } else {
-        let axis = limb
-            .hinge_local
-            .map(|a| x[p_lower].rotation * a)
-            .unwrap_or_else(|| thigh.any_orthonormal_vector());
-        let proj = axis - thigh * (axis.dot(thigh) / (l1 * l1));
-        if proj.length() > 1e-9 {
-            proj.normalize()
-        } else {
-            thigh.any_orthonormal_vector()
-        }
-    };
-    // Pull the target into the reachable shell.
-    let mut w = target - h;
-    let d = w.length();
-    let (lo, hi) = ((l1 - l2).abs(), l1 + l2);
-    let out_of_reach = d > hi || d < lo;
-    if d < 1e-12 {
-        w = thigh;
-    }
-    let wn = w.normalize();
-    let goal = h + wn * d.clamp(lo, hi);
-    // New bend plane: the old normal made orthogonal to the hip-goal line.
-    let mut n_new = n_ref - wn * n_ref.dot(wn);
-    if n_new.length() < 1e-9 {
-        n_new = wn.cross(thigh);
-        if n_new.length() < 1e-9 {
-            n_new = wn.any_orthonormal_vector();
-        }
-    }
-    let preferred = n_new.normalize();
-
-    // One candidate solution for a bend-plane normal `n`: new local rotations
-    // of the upper pivot, lower pivot and effector.
+    let geo = Geometry::new(skeleton, limb, x, target);
     let p_upper = skeleton.parent(limb.upper).unwrap_or(0);
-    let (r_u, r_pu) = (x[limb.upper].rotation, x[p_upper].rotation);
-    let (r_l, r_pl) = (x[limb.lower].rotation, x[p_lower].rotation);
-    let r_e = x[limb.effector].rotation;
-    let attempt = |n: DVec3| -> [DQuat; 3] {
+    let p_lower = skeleton.parent(limb.lower).unwrap_or(0);
+    let solver = Candidates {
+        skeleton,
+        limb,
+        original,
+        options,
+        geo: &geo,
+        r_u: x[limb.upper].rotation,
+        r_pu: x[p_upper].rotation,
+        r_l: x[limb.lower].rotation,
+        r_pl: x[p_lower].rotation,
+        r_e: x[limb.effector].rotation,
+        effector_local: pose[limb.effector],
+    };
+    let mut best = solver.attempt(geo.preferred);
+    let mut clamped = false;
+    if options.respect_limits {
+        let worst;
+        (worst, best) = solver.swivel(best);
+        if worst > 0.0 {
+            best = solver.clamp(best);
+            clamped = true;
+        }
+    }
+    for (k, &j) in solver.joints().iter().enumerate() {
+        pose[j] = best[k];
+    }
+    FrameEdit {
+        out_of_reach: geo.out_of_reach,
+        clamped,
+    }
+}
+
+/// The limb of one frame: hip, knee, effector, the bend normal, the goal.
+struct Geometry {
+    h: DVec3,
+    l1: f64,
+    l2: f64,
+    thigh: DVec3,
+    shin: DVec3,
+    /// Reference bend normal of this frame.
+    n_ref: DVec3,
+    /// Unit direction from the hip to the goal.
+    wn: DVec3,
+    /// The target pulled into the reachable shell.
+    goal: DVec3,
+    out_of_reach: bool,
+    /// New bend plane: the old normal made orthogonal to the hip-goal line.
+    preferred: DVec3,
+}
+
+impl Geometry {
+    fn new(skeleton: &Skeleton, limb: &Limb, x: &[Transform], target: DVec3) -> Self {
+        let (h, k, e) = limb.points(x);
+        let (l1, l2) = ((k - h).length(), (e - k).length());
+        let thigh = k - h;
+        let shin = e - k;
+        // Reference bend normal of this frame.
+        let m = thigh.cross(shin);
+        let p_lower = skeleton.parent(limb.lower).unwrap_or(0);
+        let n_ref = if m.length() > 1e-6 * l1 * l2 {
+            m.normalize()
+        } else {
+            let axis = limb
+                .hinge_local
+                .map(|a| x[p_lower].rotation * a)
+                .unwrap_or_else(|| thigh.any_orthonormal_vector());
+            let proj = axis - thigh * (axis.dot(thigh) / (l1 * l1));
+            if proj.length() > 1e-9 {
+                proj.normalize()
+            } else {
+                thigh.any_orthonormal_vector()
+            }
+        };
+        // Pull the target into the reachable shell.
+        let mut w = target - h;
+        let d = w.length();
+        let (lo, hi) = ((l1 - l2).abs(), l1 + l2);
+        let out_of_reach = d > hi || d < lo;
+        if d < 1e-12 {
+            w = thigh;
+        }
+        let wn = w.normalize();
+        let goal = h + wn * d.clamp(lo, hi);
+        // New bend plane: the old normal made orthogonal to the hip-goal line.
+        let mut n_new = n_ref - wn * n_ref.dot(wn);
+        if n_new.length() < 1e-9 {
+            n_new = wn.cross(thigh);
+            if n_new.length() < 1e-9 {
+                n_new = wn.any_orthonormal_vector();
+            }
+        }
+        Geometry {
+            h,
+            l1,
+            l2,
+            thigh,
+            shin,
+            n_ref,
+            wn,
+            goal,
+            out_of_reach,
+            preferred: n_new.normalize(),
+        }
+    }
+}
+
+/// Candidate solutions of one frame: new local rotations of the upper pivot,
+/// lower pivot and effector for a bend-plane normal.
+struct Candidates<'a> {
+    skeleton: &'a Skeleton,
+    limb: &'a Limb,
+    original: &'a [DQuat],
+    options: SolveOptions,
+    geo: &'a Geometry,
+    /// World rotations of the upper pivot and its parent, the lower pivot and
+    /// its parent, and the effector.
+    r_u: DQuat,
+    r_pu: DQuat,
+    r_l: DQuat,
+    r_pl: DQuat,
+    r_e: DQuat,
+    /// The effector's local rotation in the pose.
+    effector_local: DQuat,
+}
+
+impl Candidates<'_> {
+    fn joints(&self) -> [usize; 3] {
+        [self.limb.upper, self.limb.lower, self.limb.effector]
+    }
+
+    /// The solution for the bend-plane normal `n`.
+    fn attempt(&self, n: DVec3) -> [DQuat; 3] {
+        let Geometry {
+            h,
+            l1,
+            l2,
+            thigh,
+            shin,
+            n_ref,
+            wn,
+            goal,
+            ..
+        } = *self.geo;
+        let (limb, skeleton) = (self.limb, self.skeleton);
         let side = wn.cross(n); // the knee goes to this side of the hip-goal line
         let mut knee = h + (thigh - n * thigh.dot(n));
         if (knee - h).dot(side) < 1e-3 * l1 {
@@ -246,43 +345,45 @@ pub fn solve_frame(
         // Positions -> rotations of the upper and lower pivots.
         let du = frame_map(thigh, n_ref, k1 - h, n);
         let dl = arc(du * shin, e1 - k1);
-        let upper = (r_pu.inverse() * du * r_u).normalize();
-        let mut lower = (r_pl.inverse() * du.inverse() * dl * du * r_l).normalize();
-        if respect_limits && let Some(lim) = &skeleton.joint(limb.lower).limits {
-            lower = limits::project_to_dofs(lower, original[limb.lower], lim);
+        let upper = (self.r_pu.inverse() * du * self.r_u).normalize();
+        let mut lower = (self.r_pl.inverse() * du.inverse() * dl * du * self.r_l).normalize();
+        if self.options.respect_limits
+            && let Some(lim) = &skeleton.joint(limb.lower).limits
+        {
+            lower = limits::project_to_dofs(lower, self.original[limb.lower], lim);
         }
-        let effector = match orientation {
-            EffectorOrientation::World => ((dl * du * r_l).inverse() * r_e).normalize(),
-            EffectorOrientation::Local => pose[limb.effector],
+        let effector = match self.options.orientation {
+            EffectorOrientation::World => ((dl * du * self.r_l).inverse() * self.r_e).normalize(),
+            EffectorOrientation::Local => self.effector_local,
         };
         [upper, lower, effector]
-    };
-    let joints = [limb.upper, limb.lower, limb.effector];
-    let excess = |q: &[DQuat; 3]| -> f64 {
-        joints
+    }
+
+    /// How far a solution lies outside the joint limits (0 inside).
+    fn excess(&self, q: &[DQuat; 3]) -> f64 {
+        self.joints()
             .iter()
             .zip(q)
-            .map(|(&j, &r)| match &skeleton.joint(j).limits {
-                Some(lim) => limits::excess(r, original[j], lim),
+            .map(|(&j, &r)| match &self.skeleton.joint(j).limits {
+                Some(lim) => limits::excess(r, self.original[j], lim),
                 None => 0.0,
             })
             .sum()
-    };
-    // Preferred plane first; if it breaks a limit, swivel the knee/elbow about
-    // the hip-goal line (the one free degree of freedom) in growing steps and
-    // take the first solution inside the limits, else the least violating one,
-    // clamped.
-    let mut best = attempt(preferred);
-    let mut clamped = false;
-    if respect_limits {
-        let mut worst = excess(&best);
-        if worst > 0.0 {
-            let mut least = (worst, best);
+    }
+
+    /// `best` (the preferred plane's solution) if it keeps the limits, else
+    /// the knee/elbow swivelled about the hip-goal line (the one free degree
+    /// of freedom) in growing steps: the first solution inside the limits, or
+    /// the least violating one. Returns its excess too.
+    fn swivel(&self, best: [DQuat; 3]) -> (f64, [DQuat; 3]) {
+        let mut least = (self.excess(&best), best);
+        if least.0 > 0.0 {
+            let (wn, preferred) = (self.geo.wn, self.geo.preferred);
             'search: for i in 1..=SWIVEL_STEPS {
                 let delta = i as f64 * SWIVEL_STEP;
                 for a in [delta, -delta] {
-                    let q = attempt(DQuat::from_axis_angle(wn, a) * preferred);
-                    let x = excess(&q);
+                    let q = self.attempt(DQuat::from_axis_angle(wn, a) * preferred);
+                    let x = self.excess(&q);
                     if x < least.0 {
                         least = (x, q);
                     }
@@ -291,41 +392,38 @@ pub fn solve_frame(
                     }
                 }
             }
-            (worst, best) = least;
         }
-        if worst > 0.0 {
-            for (k, &j) in joints.iter().enumerate() {
-                if let Some(lim) = &skeleton.joint(j).limits {
-                    best[k] = limits::clamp(best[k], original[j], lim).0;
-                }
+        least
+    }
+
+    /// `best` clamped to the limits, the knee/elbow then re-bent about its
+    /// hinge to bring the effector as close to the goal as it gets.
+    fn clamp(&self, mut best: [DQuat; 3]) -> [DQuat; 3] {
+        let (skeleton, limb, original) = (self.skeleton, self.limb, self.original);
+        for (k, &j) in self.joints().iter().enumerate() {
+            if let Some(lim) = &skeleton.joint(j).limits {
+                best[k] = limits::clamp(best[k], original[j], lim).0;
             }
-            // With the hip/shoulder clamped, re-bend the knee/elbow about its
-            // hinge to bring the effector as close to the goal as it gets.
-            if let Some(hinge) = limb.hinge_local {
-                let d = (r_pu * best[0]) * r_u.inverse(); // world change of u's subtree
-                let k_new = h + d * thigh;
-                let frame_pl = d * r_pl;
-                let a = (frame_pl * hinge).normalize();
-                let shin_new = frame_pl * best[1] * skeleton.joint(limb.effector).offset;
-                let flat = |v: DVec3| v - a * v.dot(a);
-                let (from, to) = (flat(shin_new), flat(goal - k_new));
-                if from.length() > 1e-9 && to.length() > 1e-9 {
-                    let theta = from.cross(to).dot(a).atan2(from.dot(to));
-                    let bent = DQuat::from_axis_angle(hinge.normalize(), theta) * best[1];
-                    best[1] = match &skeleton.joint(limb.lower).limits {
-                        Some(lim) => limits::clamp(bent, original[limb.lower], lim).0,
-                        None => bent,
-                    };
-                }
-            }
-            clamped = true;
         }
-    }
-    for (k, &j) in joints.iter().enumerate() {
-        pose[j] = best[k];
-    }
-    FrameEdit {
-        out_of_reach,
-        clamped,
+        let Some(hinge) = limb.hinge_local else {
+            return best;
+        };
+        let Geometry { h, thigh, goal, .. } = *self.geo;
+        let d = (self.r_pu * best[0]) * self.r_u.inverse(); // world change of u's subtree
+        let k_new = h + d * thigh;
+        let frame_pl = d * self.r_pl;
+        let a = (frame_pl * hinge).normalize();
+        let shin_new = frame_pl * best[1] * skeleton.joint(limb.effector).offset;
+        let flat = |v: DVec3| v - a * v.dot(a);
+        let (from, to) = (flat(shin_new), flat(goal - k_new));
+        if from.length() > 1e-9 && to.length() > 1e-9 {
+            let theta = from.cross(to).dot(a).atan2(from.dot(to));
+            let bent = DQuat::from_axis_angle(hinge.normalize(), theta) * best[1];
+            best[1] = match &skeleton.joint(limb.lower).limits {
+                Some(lim) => limits::clamp(bent, original[limb.lower], lim).0,
+                None => bent,
+            };
+        }
+        best
     }
 }
