@@ -14,5 +14,6 @@ pub mod metrics;
 pub mod queue;
 pub mod routes;
 pub mod startup;
+pub mod state;
 pub mod telemetry;
 pub mod upload;

@@ -12,6 +12,8 @@ use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
 use sqlx::PgPool;
 
+use crate::state::JobState;
+
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct StateLabel {
     pub state: String,
@@ -150,18 +152,18 @@ impl Metrics {
         db: &PgPool,
         lease: std::time::Duration,
     ) -> Result<String, sqlx::Error> {
-        let counts: Vec<(String, i64)> =
+        let counts: Vec<(JobState, i64)> =
             sqlx::query_as("SELECT state, count(*) FROM jobs GROUP BY state")
                 .fetch_all(db)
                 .await?;
-        for state in ["queued", "running", "succeeded", "failed", "cancelled"] {
+        for state in JobState::ALL {
             let n = counts
                 .iter()
-                .find(|(s, _)| s == state)
+                .find(|(s, _)| *s == state)
                 .map_or(0, |(_, n)| *n);
             self.jobs
                 .get_or_create(&StateLabel {
-                    state: state.into(),
+                    state: state.as_str().into(),
                 })
                 .set(n);
         }

@@ -10,6 +10,11 @@
 //!   they used all their attempts); a re-run resumes from the stored checkpoint.
 //! * A job runs once every job it depends on succeeded; when one fails for good,
 //!   every job waiting for it fails too, naming it.
+//!
+//! States are bound as [`JobState`] values, except in the two predicates that the
+//! partial indexes `jobs_queued` and `jobs_leases` serve: Postgres uses a partial
+//! index only for a query whose text names the index's state, and a bound
+//! parameter would let a cached generic plan fall back to scanning every job.
 
 use std::time::Duration;
 
@@ -18,6 +23,11 @@ use sha2::{Digest, Sha256};
 use sqlx::types::Json;
 use sqlx::{PgPool, Postgres, Transaction};
 use uuid::Uuid;
+
+use crate::state::JobState;
+
+/// States a job can still leave on its own (it has not finished).
+const UNFINISHED: &[JobState] = &[JobState::Queued, JobState::Running];
 
 /// A job handed to a worker.
 #[derive(Debug, Clone, sqlx::FromRow)]
@@ -63,14 +73,15 @@ pub async fn claim(
     sqlx::query_as(
         "WITH next AS (
              SELECT j.id FROM jobs j
+             -- 'queued' is a literal for the partial index jobs_queued (module docs).
              WHERE j.state = 'queued' AND j.run_after <= now() AND j.kind = ANY($1)
                AND NOT EXISTS (
                    SELECT 1 FROM job_dependencies d JOIN jobs p ON p.id = d.depends_on
-                   WHERE d.job_id = j.id AND p.state <> 'succeeded')
+                   WHERE d.job_id = j.id AND p.state <> $4)
              ORDER BY j.seq
              LIMIT 1
              FOR UPDATE OF j SKIP LOCKED)
-         UPDATE jobs SET state = 'running', attempts = jobs.attempts + 1, epoch = jobs.epoch + 1,
+         UPDATE jobs SET state = $5, attempts = jobs.attempts + 1, epoch = jobs.epoch + 1,
                 worker_id = $2, claimed_at = now(),
                 lease_expires_at = now() + make_interval(secs => $3)
          FROM next WHERE jobs.id = next.id
@@ -80,6 +91,8 @@ pub async fn claim(
     .bind(kinds)
     .bind(worker_id)
     .bind(lease.as_secs_f64())
+    .bind(JobState::Succeeded)
+    .bind(JobState::Running)
     .fetch_optional(db)
     .await
 }
@@ -138,11 +151,13 @@ async fn fail_dependents(
              SELECT job_id FROM job_dependencies WHERE depends_on = $1
              UNION
              SELECT d.job_id FROM job_dependencies d JOIN down ON d.depends_on = down.id)
-         UPDATE jobs SET state = 'failed', finished_at = now(), lease_expires_at = NULL,
+         UPDATE jobs SET state = $2, finished_at = now(), lease_expires_at = NULL,
                 error = 'not run: its input ' || (SELECT key FROM jobs WHERE id = $1) || ' failed'
-         WHERE id IN (SELECT id FROM down) AND state IN ('queued', 'running')",
+         WHERE id IN (SELECT id FROM down) AND state = ANY($3)",
     )
     .bind(failed)
+    .bind(JobState::Failed)
+    .bind(UNFINISHED)
     .execute(&mut **tx)
     .await?
     .rows_affected())
@@ -166,7 +181,7 @@ async fn check_lease(
     id: Uuid,
     epoch: i64,
 ) -> Result<Lease, sqlx::Error> {
-    let row: Option<(String, i64, Uuid, String, f64)> = sqlx::query_as(
+    let row: Option<(JobState, i64, Uuid, String, f64)> = sqlx::query_as(
         "SELECT state, epoch, augmentation_id, kind,
                 COALESCE(EXTRACT(EPOCH FROM now() - claimed_at)::float8, 0)
          FROM jobs WHERE id = $1 FOR UPDATE",
@@ -175,10 +190,9 @@ async fn check_lease(
     .fetch_optional(&mut **tx)
     .await?;
     Ok(match row {
-        None => Lease::Cancelled,
-        Some((state, _, _, _, _)) if state == "cancelled" => Lease::Cancelled,
-        Some((state, current, augmentation_id, kind, claimed_for_s))
-            if state == "running" && current == epoch =>
+        None | Some((JobState::Cancelled, ..)) => Lease::Cancelled,
+        Some((JobState::Running, current, augmentation_id, kind, claimed_for_s))
+            if current == epoch =>
         {
             Lease::Current {
                 augmentation_id,
@@ -348,26 +362,25 @@ pub async fn complete(
                 return Ok(Completion::MissingFiles(missing));
             }
             sqlx::query(
-                "UPDATE jobs SET state = 'succeeded', output = $2, progress = 1, error = NULL,
+                "UPDATE jobs SET state = $3, output = $2, progress = 1, error = NULL,
                         lease_expires_at = NULL, finished_at = now(),
                         completions = completions + 1
                  WHERE id = $1",
             )
             .bind(id)
             .bind(Json(output))
+            .bind(JobState::Succeeded)
             .execute(&mut *tx)
             .await?;
             Completion::Accepted(status)
         }
         Lease::Stale => {
-            let duplicate: Option<bool> = sqlx::query_scalar(
-                "SELECT state = 'succeeded' AND epoch = $2 FROM jobs WHERE id = $1",
-            )
-            .bind(id)
-            .bind(epoch)
-            .fetch_optional(&mut *tx)
-            .await?;
-            if duplicate == Some(true) {
+            let row: Option<(JobState, i64)> =
+                sqlx::query_as("SELECT state, epoch FROM jobs WHERE id = $1")
+                    .bind(id)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+            if row == Some((JobState::Succeeded, epoch)) {
                 Completion::Duplicate
             } else {
                 Completion::Refused(Lease::Stale)
@@ -388,7 +401,7 @@ pub async fn fail(
     error: &str,
     retryable: bool,
     retry_base: Duration,
-) -> Result<(Lease, Option<String>), sqlx::Error> {
+) -> Result<(Lease, Option<JobState>), sqlx::Error> {
     let mut tx = db.begin().await?;
     let status = check_lease(&mut tx, id, epoch).await?;
     let mut new_state = None;
@@ -399,23 +412,28 @@ pub async fn fail(
                 .fetch_one(&mut *tx)
                 .await?;
         let retry = retryable && attempts < max_attempts;
-        let state = if retry { "queued" } else { "failed" };
+        let state = if retry {
+            JobState::Queued
+        } else {
+            JobState::Failed
+        };
         sqlx::query(
             "UPDATE jobs SET state = $2, error = $3, worker_id = NULL, lease_expires_at = NULL,
                     run_after = now() + make_interval(secs => $4),
-                    finished_at = CASE WHEN $2 = 'failed' THEN now() END
+                    finished_at = CASE WHEN $5 THEN now() END
              WHERE id = $1",
         )
         .bind(id)
         .bind(state)
         .bind(error)
         .bind(backoff(retry_base, attempts).as_secs_f64())
+        .bind(state == JobState::Failed)
         .execute(&mut *tx)
         .await?;
-        if state == "failed" {
+        if state == JobState::Failed {
             fail_dependents(&mut tx, id).await?;
         }
-        new_state = Some(state.to_string());
+        new_state = Some(state);
     }
     tx.commit().await?;
     Ok((status, new_state))
@@ -427,11 +445,12 @@ pub async fn release(db: &PgPool, id: Uuid, epoch: i64) -> Result<Lease, sqlx::E
     let status = check_lease(&mut tx, id, epoch).await?;
     if matches!(status, Lease::Current { .. }) {
         sqlx::query(
-            "UPDATE jobs SET state = 'queued', attempts = GREATEST(attempts - 1, 0),
+            "UPDATE jobs SET state = $2, attempts = GREATEST(attempts - 1, 0),
                     worker_id = NULL, lease_expires_at = NULL, run_after = now()
              WHERE id = $1",
         )
         .bind(id)
+        .bind(JobState::Queued)
         .execute(&mut *tx)
         .await?;
     }
@@ -445,7 +464,7 @@ pub struct Reaped {
     pub id: Uuid,
     pub augmentation_id: Uuid,
     pub kind: String,
-    pub state: String,
+    pub state: JobState,
 }
 
 /// Returns jobs with an expired lease to the queue (or fails them when they have
@@ -455,10 +474,11 @@ pub async fn reap(db: &PgPool, retry_base: Duration) -> Result<Vec<Reaped>, sqlx
     let reaped: Vec<Reaped> = sqlx::query_as(
         "WITH expired AS (
              SELECT id FROM jobs
+             -- 'running' is a literal for the partial index jobs_leases (module docs).
              WHERE state = 'running' AND lease_expires_at < now()
              FOR UPDATE SKIP LOCKED)
          UPDATE jobs SET
-             state = CASE WHEN attempts >= max_attempts THEN 'failed' ELSE 'queued' END,
+             state = CASE WHEN attempts >= max_attempts THEN $2 ELSE $3 END,
              error = 'lease expired: worker ' || COALESCE(worker_id, '?')
                      || ' stopped sending heartbeats (attempt ' || attempts || ')',
              worker_id = NULL, lease_expires_at = NULL,
@@ -468,9 +488,11 @@ pub async fn reap(db: &PgPool, retry_base: Duration) -> Result<Vec<Reaped>, sqlx
          RETURNING jobs.id, jobs.augmentation_id, jobs.kind, jobs.state",
     )
     .bind(retry_base.as_secs_f64())
+    .bind(JobState::Failed)
+    .bind(JobState::Queued)
     .fetch_all(&mut *tx)
     .await?;
-    for job in reaped.iter().filter(|j| j.state == "failed") {
+    for job in reaped.iter().filter(|j| j.state == JobState::Failed) {
         fail_dependents(&mut tx, job.id).await?;
     }
     tx.commit().await?;
@@ -487,10 +509,12 @@ pub async fn cancel_augmentation(db: &PgPool, augmentation_id: Uuid) -> Result<u
     .execute(&mut *tx)
     .await?;
     let changed = sqlx::query(
-        "UPDATE jobs SET state = 'cancelled', lease_expires_at = NULL, finished_at = now()
-         WHERE augmentation_id = $1 AND state IN ('queued', 'running')",
+        "UPDATE jobs SET state = $2, lease_expires_at = NULL, finished_at = now()
+         WHERE augmentation_id = $1 AND state = ANY($3)",
     )
     .bind(augmentation_id)
+    .bind(JobState::Cancelled)
+    .bind(UNFINISHED)
     .execute(&mut *tx)
     .await?
     .rows_affected();

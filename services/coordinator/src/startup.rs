@@ -17,6 +17,7 @@ use tokio::task::JoinHandle;
 use crate::configuration::Config;
 use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
+use crate::state::JobState;
 use crate::{queue, routes};
 
 /// Shared state of the request handlers.
@@ -173,7 +174,7 @@ async fn reap_once(state: &AppState) {
                         id: job.augmentation_id,
                     })
                     .await;
-                if job.state == "queued" {
+                if job.state == JobState::Queued {
                     state.events.publish(Event::Wake { kind: job.kind }).await;
                 }
             }

@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use motionaug_coordinator::configuration::Config;
 use motionaug_coordinator::startup::Application;
+use motionaug_coordinator::state::JobState;
 use reqwest::StatusCode;
 use reqwest::multipart::{Form, Part};
 use serde_json::{Value, json};
@@ -1525,5 +1526,23 @@ async fn bad_tables_and_pairs_are_refused_with_the_field() {
         .await
         .unwrap();
     assert_eq!(jobs, 0);
+    app.cleanup().await;
+}
+
+/// `JobState` names exactly the states the `jobs.state` CHECK constraint allows.
+#[tokio::test]
+async fn job_states_match_the_schema() {
+    let app = spawn_app(&[]).await;
+    let check: String = sqlx::query_scalar(
+        "SELECT pg_get_constraintdef(c.oid) FROM pg_constraint c
+         WHERE c.conrelid = 'jobs'::regclass AND c.contype = 'c'
+           AND pg_get_constraintdef(c.oid) LIKE '%state%'",
+    )
+    .fetch_one(&app.db)
+    .await
+    .unwrap();
+    let allowed: Vec<&str> = check.split('\'').skip(1).step_by(2).collect();
+    let ours: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
+    assert_eq!(allowed, ours, "{check}");
     app.cleanup().await;
 }

@@ -27,16 +27,7 @@ use crate::events::Event;
 use crate::queue;
 use crate::routes::datasets;
 use crate::startup::AppState;
-
-#[derive(Debug, Default, Serialize, Clone, PartialEq)]
-pub struct JobCounts {
-    pub total: i64,
-    pub queued: i64,
-    pub running: i64,
-    pub succeeded: i64,
-    pub failed: i64,
-    pub cancelled: i64,
-}
+use crate::state::{AugmentationState, JobCounts, JobState};
 
 #[derive(Debug, Serialize, Clone, PartialEq)]
 pub struct JobError {
@@ -51,20 +42,13 @@ pub struct JobError {
 pub struct AugmentationStatus {
     pub id: Uuid,
     pub dataset_id: Uuid,
-    /// queued | running | succeeded | failed | cancelled
-    pub status: &'static str,
+    pub status: AugmentationState,
     pub progress: f64,
     pub jobs: JobCounts,
     /// Jobs of each kind (`synthesize`, `correct`, ...).
     pub kinds: BTreeMap<String, i64>,
     pub errors: Vec<JobError>,
     pub created_at: DateTime<Utc>,
-}
-
-impl AugmentationStatus {
-    pub fn is_terminal(&self) -> bool {
-        matches!(self.status, "succeeded" | "failed" | "cancelled")
-    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -238,7 +222,7 @@ pub async fn create(
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, format!("/v1/augmentations/{id}"))],
-        Json(json!({ "id": id, "status": "queued" })),
+        Json(json!({ "id": id, "status": AugmentationState::Queued })),
     )
         .into_response())
 }
@@ -250,53 +234,43 @@ pub async fn load_status(
     id: Uuid,
 ) -> Result<Option<AugmentationStatus>, ApiError> {
     // One statement, so the cancellation mark and the job counts come from the
-    // same snapshot (a cancel between two reads would look like a failure).
+    // same snapshot (a cancel between two reads would look like a failure). One
+    // row per state of its jobs (one row with no state when it has none).
     type Row = (
         Uuid,
         Option<DateTime<Utc>>,
         DateTime<Utc>,
-        i64,
-        i64,
-        i64,
-        i64,
-        i64,
+        Option<JobState>,
         i64,
         f64,
     );
-    let row: Option<Row> = sqlx::query_as(
+    let rows: Vec<Row> = sqlx::query_as(
         "SELECT a.dataset_id, a.cancelled_at, a.created_at,
-                c.total, c.queued, c.running, c.succeeded, c.failed, c.cancelled, c.done
-         FROM augmentations a
-         CROSS JOIN LATERAL (
-             SELECT count(*) AS total,
-                    count(*) FILTER (WHERE state = 'queued') AS queued,
-                    count(*) FILTER (WHERE state = 'running') AS running,
-                    count(*) FILTER (WHERE state = 'succeeded') AS succeeded,
-                    count(*) FILTER (WHERE state = 'failed') AS failed,
-                    count(*) FILTER (WHERE state = 'cancelled') AS cancelled,
-                    COALESCE(sum(CASE WHEN state = 'succeeded' THEN 1 ELSE progress END), 0)::float8 AS done
-             FROM jobs WHERE augmentation_id = a.id) c
-         WHERE a.id = $1 AND a.tenant_id = $2",
+                j.state, count(j.id), COALESCE(sum(j.progress), 0)::float8
+         FROM augmentations a LEFT JOIN jobs j ON j.augmentation_id = a.id
+         WHERE a.id = $1 AND a.tenant_id = $2
+         GROUP BY a.id, j.state",
     )
     .bind(id)
     .bind(tenant_id)
-    .fetch_optional(&state.db)
+    .fetch_all(&state.db)
     .await?;
-    let Some((
-        dataset_id,
-        cancelled_at,
-        created_at,
-        total,
-        queued,
-        running,
-        succeeded,
-        failed,
-        cancelled,
-        done,
-    )) = row
-    else {
+    let Some(&(dataset_id, cancelled_at, created_at, ..)) = rows.first() else {
         return Ok(None);
     };
+    let mut jobs = JobCounts::default();
+    // Succeeded jobs count whole, the others by their reported progress.
+    let mut done = 0.0;
+    for (.., job_state, count, progress) in rows {
+        if let Some(job_state) = job_state {
+            jobs.add(job_state, count);
+            done += if job_state == JobState::Succeeded {
+                count as f64
+            } else {
+                progress
+            };
+        }
+    }
     let kinds: Vec<(String, i64)> =
         sqlx::query_as("SELECT kind, count(*) FROM jobs WHERE augmentation_id = $1 GROUP BY kind")
             .bind(id)
@@ -304,39 +278,22 @@ pub async fn load_status(
             .await?;
     let errors: Vec<(Uuid, String, Option<String>, String)> = sqlx::query_as(
         "SELECT id, key, input->>'clip_name', error FROM jobs
-         WHERE augmentation_id = $1 AND state = 'failed' AND error IS NOT NULL ORDER BY seq",
+         WHERE augmentation_id = $1 AND state = $2 AND error IS NOT NULL ORDER BY seq",
     )
     .bind(id)
+    .bind(JobState::Failed)
     .fetch_all(&state.db)
     .await?;
-    let status = if cancelled_at.is_some() {
-        "cancelled"
-    } else if succeeded == total {
-        "succeeded"
-    } else if queued + running == 0 {
-        if failed > 0 { "failed" } else { "cancelled" }
-    } else if running > 0 || succeeded > 0 || failed > 0 {
-        "running"
-    } else {
-        "queued"
-    };
     Ok(Some(AugmentationStatus {
         id,
         dataset_id,
-        status,
-        progress: if total == 0 {
+        status: AugmentationState::of_jobs(cancelled_at.is_some(), &jobs),
+        progress: if jobs.total == 0 {
             1.0
         } else {
-            (done / total as f64).clamp(0.0, 1.0)
+            (done / jobs.total as f64).clamp(0.0, 1.0)
         },
-        jobs: JobCounts {
-            total,
-            queued,
-            running,
-            succeeded,
-            failed,
-            cancelled,
-        },
+        jobs,
         kinds: kinds.into_iter().collect(),
         errors: errors
             .into_iter()
@@ -396,7 +353,7 @@ pub async fn cancel(
     state.events.publish(Event::Augmentation { id }).await;
     Ok((
         StatusCode::ACCEPTED,
-        Json(json!({ "id": id, "status": "cancelled" })),
+        Json(json!({ "id": id, "status": AugmentationState::Cancelled })),
     )
         .into_response())
 }
@@ -436,7 +393,7 @@ pub async fn events(
             }
             match load_status(&f.state, f.tenant_id, f.id).await {
                 Ok(Some(status)) if f.last.as_ref() != Some(&status) => {
-                    f.done = status.is_terminal();
+                    f.done = status.status.is_terminal();
                     let event = SseEvent::default()
                         .event("status")
                         .json_data(&status)
@@ -486,7 +443,7 @@ pub async fn results(
     let status = load_status(&state, tenant.id, id)
         .await?
         .ok_or_else(|| ApiError::not_found("augmentation"))?;
-    if status.status != "succeeded" {
+    if status.status != AugmentationState::Succeeded {
         return Err(ApiError::conflict(format!(
             "the augmentation is {}; results can be downloaded once it has succeeded",
             status.status

@@ -26,6 +26,7 @@ use crate::events::Event;
 use crate::metrics::{FailureLabel, KindLabel};
 use crate::queue::{self, Completion, Lease};
 use crate::startup::AppState;
+use crate::state::JobState;
 
 #[derive(Debug, Deserialize)]
 pub struct EpochQuery {
@@ -331,7 +332,7 @@ pub async fn fail(
     )
     .await?;
     let (augmentation_id, kind) = accept(&state, lease)?;
-    tracing::warn!(job = %id, %kind, error = %error, new_state = ?new_state, "job attempt failed");
+    tracing::warn!(job = %id, %kind, error = %error, new_state = ?new_state.map(JobState::as_str), "job attempt failed");
     state
         .metrics
         .job_failures
