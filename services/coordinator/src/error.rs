@@ -6,20 +6,46 @@
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
+use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
+use utoipa::{ToResponse, ToSchema};
 
-#[derive(Debug, Clone, Serialize)]
+/// RFC 9457 problem details.
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Problem {
+    /// Always `about:blank`: `title` and `status` say what happened.
     #[serde(rename = "type")]
     pub kind: &'static str,
     pub title: &'static str,
+    /// The HTTP status code.
     pub status: u16,
+    /// What went wrong and what to do about it.
     pub detail: String,
+    /// The uploaded file the problem is in (`recipe` for the recipe).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
     pub file: Option<String>,
+    /// The line of that file.
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
     pub line: Option<usize>,
+    /// The form field, or the recipe's table or field, that is wrong.
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
     pub field: Option<String>,
+}
+
+/// The `Problem` response of the OpenAPI document, which every error answer uses.
+impl<'r> ToResponse<'r> for Problem {
+    fn response() -> (&'r str, RefOr<utoipa::openapi::Response>) {
+        let content = ContentBuilder::new()
+            .schema(Some(Ref::from_schema_name("Problem")))
+            .build();
+        let response = ResponseBuilder::new()
+            .description("RFC 9457 problem")
+            .content("application/problem+json", content)
+            .build();
+        ("Problem", response.into())
+    }
 }
 
 /// An error answer of the API.

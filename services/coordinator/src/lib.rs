@@ -11,6 +11,7 @@ pub mod configuration;
 pub mod error;
 pub mod events;
 pub mod metrics;
+pub mod openapi;
 pub mod queue;
 pub mod routes;
 pub mod startup;

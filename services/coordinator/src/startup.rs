@@ -5,10 +5,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use axum::Router;
 use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::{self, Next};
 use axum::response::Response;
+use axum::{Extension, Router};
 use sqlx::PgPool;
 use sqlx::postgres::PgPoolOptions;
 use tokio::net::TcpListener;
@@ -17,6 +17,7 @@ use tokio::task::JoinHandle;
 use crate::configuration::Config;
 use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
+use crate::openapi::{self, OpenApiJson};
 use crate::state::JobState;
 use crate::{queue, routes};
 
@@ -106,8 +107,12 @@ impl Application {
     }
 }
 
+/// The application's router, serving the OpenAPI document that its routes make.
 pub fn router(state: AppState) -> Router {
-    routes::router(state.clone())
+    let (routes, api) = routes::router(&state.config.limits).split_for_parts();
+    let document = OpenApiJson::new(&openapi::finish(api));
+    routes
+        .layer(Extension(document))
         .layer(middleware::from_fn_with_state(
             state.clone(),
             track_requests,

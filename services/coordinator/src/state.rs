@@ -105,7 +105,7 @@ impl<'r> Decode<'r, Postgres> for JobState {
 }
 
 /// How many of an augmentation's jobs are in each state.
-#[derive(Debug, Default, Serialize, Clone, PartialEq)]
+#[derive(Debug, Default, Serialize, Clone, PartialEq, utoipa::ToSchema)]
 pub struct JobCounts {
     pub total: i64,
     pub queued: i64,
@@ -130,19 +130,17 @@ impl JobCounts {
     }
 }
 
-/// Where an augmentation is, derived from its jobs ([`AugmentationState::of_jobs`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// Where an augmentation is, derived from its jobs' states: `queued` (no job has
+/// started), `running` (some job has started or ended, some is still to run),
+/// `succeeded` (every job did: the results can be downloaded), `failed` (nothing
+/// is left to run and some job failed), `cancelled` (by its owner).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum AugmentationState {
-    /// No job has started yet.
     Queued,
-    /// Some job has started or ended and some job is still to run.
     Running,
-    /// Every job succeeded: the results can be downloaded.
     Succeeded,
-    /// Nothing is left to run and some job failed.
     Failed,
-    /// Cancelled by its owner.
     Cancelled,
 }
 

@@ -17,43 +17,66 @@ use chrono::{DateTime, Utc};
 use futures_util::Stream;
 use motionaug_protocol::{ClipFormat, ClipRef, JobOutput, PipelineInput};
 use serde::{Deserialize, Serialize};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tokio::sync::broadcast::error::RecvError;
+use utoipa::{IntoParams, ToSchema};
 use uuid::Uuid;
 
 use crate::auth::Tenant;
-use crate::error::ApiError;
+use crate::error::{ApiError, Problem};
 use crate::events::Event;
+use crate::openapi::{Binary, Recipe};
 use crate::queue;
 use crate::routes::datasets;
 use crate::startup::AppState;
 use crate::state::{AugmentationState, JobCounts, JobState};
 
-#[derive(Debug, Serialize, Clone, PartialEq)]
+/// A job that failed for good.
+#[derive(Debug, Serialize, Clone, PartialEq, ToSchema)]
 pub struct JobError {
     pub job: Uuid,
     /// The job's key in the graph, e.g. `correct:walk__00_noise_000`.
     pub key: String,
+    /// The clip the job was about, when there is one.
     pub clip: Option<String>,
     pub error: String,
 }
 
-#[derive(Debug, Serialize, Clone, PartialEq)]
+/// An augmentation's state, progress and job counts.
+#[derive(Debug, Serialize, Clone, PartialEq, ToSchema)]
+#[schema(as = Augmentation)]
 pub struct AugmentationStatus {
     pub id: Uuid,
     pub dataset_id: Uuid,
     pub status: AugmentationState,
+    /// Fraction done: succeeded jobs count whole, running ones by their progress.
+    #[schema(minimum = 0, maximum = 1)]
     pub progress: f64,
     pub jobs: JobCounts,
-    /// Jobs of each kind (`synthesize`, `correct`, ...).
+    /// Jobs of each kind: synthesize, vae, interaction, correct_original, correct,
+    /// debias_train, debias_apply.
     pub kinds: BTreeMap<String, i64>,
     pub errors: Vec<JobError>,
     pub created_at: DateTime<Utc>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AugmentationList {
+    pub augmentations: Vec<AugmentationStatus>,
+}
+
+/// The augmentation a request started or cancelled.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AugmentationRef {
+    pub id: Uuid,
+    /// Its state right after the request.
+    pub status: AugmentationState,
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct CreateQuery {
-    /// Seed of the whole augmentation (same meaning as the CLI's `--seed`).
+    /// Overrides the recipe's seed (like the CLI's `--seed`).
     pub seed: Option<u64>,
 }
 
@@ -142,6 +165,26 @@ fn to_json<T: Serialize>(value: &T) -> Result<Value, ApiError> {
     serde_json::to_value(value).map_err(|e| ApiError::internal(e.to_string()))
 }
 
+/// Start an augmentation: the job graph of the recipe over the dataset's clips
+///
+/// Synthesis, VAE sampling, interaction variants, physical correction and
+/// debiasing, as `motionaug augment` runs them.
+#[utoipa::path(
+    post,
+    path = "/v1/datasets/{id}/augmentations",
+    operation_id = "createAugmentation",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The dataset's id"), CreateQuery),
+    request_body(content = Recipe),
+    responses(
+        (status = 202, description = "Queued", body = AugmentationRef,
+            headers(("Location" = String, description = "The augmentation's URL"))),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+        (status = 413, response = Problem),
+        (status = 422, response = Problem),
+    )
+)]
 pub async fn create(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -222,7 +265,10 @@ pub async fn create(
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, format!("/v1/augmentations/{id}"))],
-        Json(json!({ "id": id, "status": AugmentationState::Queued })),
+        Json(AugmentationRef {
+            id,
+            status: AugmentationState::Queued,
+        }),
     )
         .into_response())
 }
@@ -308,6 +354,19 @@ pub async fn load_status(
     }))
 }
 
+/// Status, progress and job counts
+#[utoipa::path(
+    get,
+    path = "/v1/augmentations/{id}",
+    operation_id = "getAugmentation",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The augmentation's id")),
+    responses(
+        (status = 200, description = "Status", body = AugmentationStatus),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn get(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -319,11 +378,24 @@ pub async fn get(
         .ok_or_else(|| ApiError::not_found("augmentation"))
 }
 
+/// List the dataset's augmentations
+#[utoipa::path(
+    get,
+    path = "/v1/datasets/{id}/augmentations",
+    operation_id = "listAugmentations",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The dataset's id")),
+    responses(
+        (status = 200, description = "Augmentations", body = AugmentationList),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn list(
     State(state): State<AppState>,
     tenant: Tenant,
     Path(dataset_id): Path<Uuid>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<AugmentationList>, ApiError> {
     datasets::find(&state, &tenant, dataset_id).await?;
     let ids: Vec<Uuid> = sqlx::query_scalar(
         "SELECT id FROM augmentations WHERE dataset_id = $1 ORDER BY created_at, id",
@@ -337,9 +409,22 @@ pub async fn list(
             out.push(status);
         }
     }
-    Ok(Json(json!({ "augmentations": out })))
+    Ok(Json(AugmentationList { augmentations: out }))
 }
 
+/// Cancel (running jobs stop at their next heartbeat)
+#[utoipa::path(
+    delete,
+    path = "/v1/augmentations/{id}",
+    operation_id = "cancelAugmentation",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The augmentation's id")),
+    responses(
+        (status = 202, description = "Cancelled", body = AugmentationRef),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn cancel(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -353,7 +438,10 @@ pub async fn cancel(
     state.events.publish(Event::Augmentation { id }).await;
     Ok((
         StatusCode::ACCEPTED,
-        Json(json!({ "id": id, "status": AugmentationState::Cancelled })),
+        Json(AugmentationRef {
+            id,
+            status: AugmentationState::Cancelled,
+        }),
     )
         .into_response())
 }
@@ -367,9 +455,23 @@ struct Follow {
     done: bool,
 }
 
-/// Server-sent events: a `status` event (same body as `GET /v1/augmentations/{id}`)
-/// now and after every change, until the augmentation ends. Woken by Redis events,
-/// with a database poll as the fallback.
+/// Server-sent events: `status` events (same body as GET /v1/augmentations/{id}) on every change until the augmentation ends
+///
+/// One `status` event now and one after every change; a `deleted` event if the
+/// augmentation's dataset is deleted. Woken by Redis events, with a database
+/// poll as the fallback.
+#[utoipa::path(
+    get,
+    path = "/v1/augmentations/{id}/events",
+    operation_id = "augmentationEvents",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The augmentation's id")),
+    responses(
+        (status = 200, description = "Event stream", content_type = "text/event-stream", body = String),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn events(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -433,8 +535,23 @@ async fn wait_for_change(
     let _ = tokio::time::timeout(poll, wait).await;
 }
 
-/// A zip of every final output with `manifest.json` (the same manifest the CLI
-/// writes) and the correction reports the manifest names.
+/// Zip of every output (BVH, masks) with manifest.json as the CLI writes it
+///
+/// With the correction reports the manifest names. Only once the augmentation
+/// has succeeded (409 before).
+#[utoipa::path(
+    get,
+    path = "/v1/augmentations/{id}/results",
+    operation_id = "augmentationResults",
+    tag = "augmentations",
+    params(("id" = Uuid, Path, description = "The augmentation's id")),
+    responses(
+        (status = 200, description = "Zip", content_type = "application/zip", body = inline(Binary)),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+        (status = 409, response = Problem),
+    )
+)]
 pub async fn results(
     State(state): State<AppState>,
     tenant: Tenant,

@@ -6,31 +6,54 @@ use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use chrono::{DateTime, Utc};
 use serde::Serialize;
-use serde_json::json;
+use utoipa::ToSchema;
 use uuid::Uuid;
 
 use crate::auth::Tenant;
-use crate::error::{ApiError, from_rejection};
+use crate::error::{ApiError, Problem, from_rejection};
 use crate::events::Event;
+use crate::openapi::DatasetUpload;
 use crate::queue;
 use crate::startup::AppState;
 use crate::upload::{UploadFile, parse_upload};
 
-#[derive(Debug, Serialize, sqlx::FromRow)]
+/// A stored clip.
+#[derive(Debug, Serialize, sqlx::FromRow, ToSchema)]
+#[schema(as = Clip)]
 pub struct ClipSummary {
     pub id: Uuid,
+    /// The file's stem, unique in the dataset.
     pub name: String,
     pub frames: i32,
     pub fps: f64,
     pub joints: i32,
 }
 
-#[derive(Debug, Serialize, sqlx::FromRow)]
+/// A dataset in the list of a tenant's datasets.
+#[derive(Debug, Serialize, sqlx::FromRow, ToSchema)]
+#[schema(as = DatasetListItem)]
 pub struct DatasetRow {
     pub id: Uuid,
     pub name: String,
     pub created_at: DateTime<Utc>,
     pub clip_count: i64,
+}
+
+/// A dataset with its clips in upload order.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Dataset {
+    pub id: Uuid,
+    pub name: String,
+    /// When it was uploaded (not part of the answer to the upload itself).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = DateTime<Utc>)]
+    pub created_at: Option<DateTime<Utc>>,
+    pub clips: Vec<ClipSummary>,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DatasetList {
+    pub datasets: Vec<DatasetRow>,
 }
 
 /// Reads the multipart body: `file` parts (any number) and an optional `name`.
@@ -102,6 +125,25 @@ async fn read_parts(
     Ok((name, files))
 }
 
+/// Upload a dataset (all or nothing)
+///
+/// Every file is checked before anything is stored: one bad file refuses the
+/// whole upload, naming the file and, where it can, the line.
+#[utoipa::path(
+    post,
+    path = "/v1/datasets",
+    operation_id = "createDataset",
+    tag = "datasets",
+    request_body(content = inline(DatasetUpload), content_type = "multipart/form-data"),
+    responses(
+        (status = 201, description = "Stored", body = Dataset,
+            headers(("Location" = String, description = "The dataset's URL"))),
+        (status = 400, response = Problem),
+        (status = 401, response = Problem),
+        (status = 413, response = Problem),
+        (status = 422, response = Problem),
+    )
+)]
 pub async fn create(
     State(state): State<AppState>,
     tenant: Tenant,
@@ -159,7 +201,12 @@ pub async fn create(
     }
     tx.commit().await?;
     tracing::info!(tenant = %tenant.name, dataset = %dataset_id, clips = summaries.len(), "dataset uploaded");
-    let body = json!({ "id": dataset_id, "name": name, "clips": summaries });
+    let body = Dataset {
+        id: dataset_id,
+        name,
+        created_at: None,
+        clips: summaries,
+    };
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, format!("/v1/datasets/{dataset_id}"))],
@@ -168,10 +215,21 @@ pub async fn create(
         .into_response())
 }
 
+/// List datasets
+#[utoipa::path(
+    get,
+    path = "/v1/datasets",
+    operation_id = "listDatasets",
+    tag = "datasets",
+    responses(
+        (status = 200, description = "Datasets", body = DatasetList),
+        (status = 401, response = Problem),
+    )
+)]
 pub async fn list(
     State(state): State<AppState>,
     tenant: Tenant,
-) -> Result<Json<serde_json::Value>, ApiError> {
+) -> Result<Json<DatasetList>, ApiError> {
     let rows: Vec<DatasetRow> = sqlx::query_as(
         "SELECT d.id, d.name, d.created_at,
                 (SELECT count(*) FROM clips c WHERE c.dataset_id = d.id) AS clip_count
@@ -180,7 +238,7 @@ pub async fn list(
     .bind(tenant.id)
     .fetch_all(&state.db)
     .await?;
-    Ok(Json(json!({ "datasets": rows })))
+    Ok(Json(DatasetList { datasets: rows }))
 }
 
 /// The dataset if it belongs to the tenant (another tenant's dataset is "not found").
@@ -197,11 +255,24 @@ pub async fn find(state: &AppState, tenant: &Tenant, id: Uuid) -> Result<Dataset
     .ok_or_else(|| ApiError::not_found("dataset"))
 }
 
+/// Show a dataset with its clips
+#[utoipa::path(
+    get,
+    path = "/v1/datasets/{id}",
+    operation_id = "getDataset",
+    tag = "datasets",
+    params(("id" = Uuid, Path, description = "The dataset's id")),
+    responses(
+        (status = 200, description = "Dataset", body = Dataset),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn get(
     State(state): State<AppState>,
     tenant: Tenant,
     Path(id): Path<Uuid>,
-) -> Result<Json<serde_json::Value>, ApiError> {
+) -> Result<Json<Dataset>, ApiError> {
     let dataset = find(&state, &tenant, id).await?;
     let clips: Vec<ClipSummary> = sqlx::query_as(
         "SELECT id, name, frames, fps, joints FROM clips WHERE dataset_id = $1 ORDER BY position",
@@ -209,16 +280,29 @@ pub async fn get(
     .bind(id)
     .fetch_all(&state.db)
     .await?;
-    Ok(Json(json!({
-        "id": dataset.id,
-        "name": dataset.name,
-        "created_at": dataset.created_at,
-        "clips": clips,
-    })))
+    Ok(Json(Dataset {
+        id: dataset.id,
+        name: dataset.name,
+        created_at: Some(dataset.created_at),
+        clips,
+    }))
 }
 
-/// Deletes the dataset with its clips, augmentations and results; running jobs
-/// of its augmentations are told to stop at their next heartbeat.
+/// Delete a dataset, its clips, augmentations and results (running jobs are cancelled)
+///
+/// Running jobs of its augmentations are told to stop at their next heartbeat.
+#[utoipa::path(
+    delete,
+    path = "/v1/datasets/{id}",
+    operation_id = "deleteDataset",
+    tag = "datasets",
+    params(("id" = Uuid, Path, description = "The dataset's id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn delete(
     State(state): State<AppState>,
     tenant: Tenant,

@@ -18,18 +18,22 @@ use motionaug_protocol::{
 };
 use serde::Deserialize;
 use tokio::sync::broadcast::error::RecvError;
+use utoipa::IntoParams;
 use uuid::Uuid;
 
 use crate::auth::Worker;
-use crate::error::ApiError;
+use crate::error::{ApiError, Problem};
 use crate::events::Event;
 use crate::metrics::{FailureLabel, KindLabel};
+use crate::openapi::{Binary, wire};
 use crate::queue::{self, Completion, Lease};
 use crate::startup::AppState;
 use crate::state::JobState;
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct EpochQuery {
+    /// The lease epoch of the worker's claim.
     pub epoch: i64,
 }
 
@@ -68,8 +72,24 @@ fn valid_worker_id(id: &str) -> Result<(), ApiError> {
     Ok(())
 }
 
-/// Claims a job, holding the request open up to `wait_ms` (capped) until one is
-/// runnable. Woken early by `wake` events; polls the database as a fallback.
+/// Worker: claim a job (long poll)
+///
+/// Holds the request open up to `wait_ms` (capped) until a job of one of `kinds`
+/// is runnable. Woken early by `wake` events; polls the database as a fallback.
+#[utoipa::path(
+    post,
+    path = "/internal/v1/jobs/claim",
+    operation_id = "claimJob",
+    tag = "internal",
+    security(("workerToken" = [])),
+    request_body = wire::ClaimRequest,
+    responses(
+        (status = 200, description = "Claimed job with lease epoch", body = wire::ClaimedJob),
+        (status = 204, description = "No job became runnable in time"),
+        (status = 400, response = Problem),
+        (status = 401, response = Problem),
+    )
+)]
 pub async fn claim(
     State(state): State<AppState>,
     _: Worker,
@@ -136,6 +156,21 @@ pub async fn claim(
     }
 }
 
+/// Worker: extend the lease, report progress; answer says whether the job was cancelled
+#[utoipa::path(
+    post,
+    path = "/internal/v1/jobs/{id}/heartbeat",
+    operation_id = "heartbeatJob",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id")),
+    request_body = wire::HeartbeatRequest,
+    responses(
+        (status = 200, description = "ok", body = wire::HeartbeatReply),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+    )
+)]
 pub async fn heartbeat(
     State(state): State<AppState>,
     _: Worker,
@@ -189,6 +224,30 @@ fn valid_artifact_name(name: &str) -> Result<(), ApiError> {
     }
 }
 
+/// Worker: store one result file
+///
+/// `name` is a relative path of `[A-Za-z0-9._-]` segments; an earlier attempt's
+/// file of the same name is replaced.
+#[utoipa::path(
+    put,
+    path = "/internal/v1/jobs/{id}/artifacts/{*name}",
+    operation_id = "putArtifact",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(
+        ("id" = Uuid, Path, description = "The job's id"),
+        ("name" = String, Path, description = "The file's name"),
+        EpochQuery,
+    ),
+    request_body(content = inline(Binary), content_type = "application/octet-stream"),
+    responses(
+        (status = 204, description = "Stored"),
+        (status = 400, response = Problem),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn put_artifact(
     State(state): State<AppState>,
     _: Worker,
@@ -207,6 +266,22 @@ pub async fn put_artifact(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// Worker: store the job's checkpoint
+#[utoipa::path(
+    put,
+    path = "/internal/v1/jobs/{id}/checkpoint",
+    operation_id = "putCheckpoint",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id"), EpochQuery),
+    request_body(content = inline(Binary), content_type = "application/octet-stream"),
+    responses(
+        (status = 204, description = "Stored"),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn put_checkpoint(
     State(state): State<AppState>,
     _: Worker,
@@ -219,6 +294,22 @@ pub async fn put_checkpoint(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// Worker: read the job's checkpoint
+#[utoipa::path(
+    get,
+    path = "/internal/v1/jobs/{id}/checkpoint",
+    operation_id = "getCheckpoint",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id"), EpochQuery),
+    responses(
+        (status = 200, description = "bytes", content_type = "application/octet-stream", body = inline(Binary)),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn get_checkpoint(
     State(state): State<AppState>,
     _: Worker,
@@ -233,6 +324,25 @@ pub async fn get_checkpoint(
     }
 }
 
+/// Worker: report success (idempotent for the same epoch)
+///
+/// Every file the output names must have been uploaded by the job.
+#[utoipa::path(
+    post,
+    path = "/internal/v1/jobs/{id}/complete",
+    operation_id = "completeJob",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id")),
+    request_body = wire::CompleteRequest,
+    responses(
+        (status = 204, description = "Recorded"),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+        (status = 422, response = Problem),
+    )
+)]
 pub async fn complete(
     State(state): State<AppState>,
     _: Worker,
@@ -315,6 +425,22 @@ async fn check_output(
     Ok(files)
 }
 
+/// Worker: report a failed attempt (retried with backoff while attempts remain and retryable)
+#[utoipa::path(
+    post,
+    path = "/internal/v1/jobs/{id}/fail",
+    operation_id = "failJob",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id")),
+    request_body = wire::FailRequest,
+    responses(
+        (status = 204, description = "Recorded"),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn fail(
     State(state): State<AppState>,
     _: Worker,
@@ -350,6 +476,22 @@ pub async fn fail(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// Worker: hand the job back without using an attempt (shutdown)
+#[utoipa::path(
+    post,
+    path = "/internal/v1/jobs/{id}/release",
+    operation_id = "releaseJob",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The job's id")),
+    request_body = wire::ReleaseRequest,
+    responses(
+        (status = 204, description = "Released"),
+        (status = 401, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn release(
     State(state): State<AppState>,
     _: Worker,
@@ -369,8 +511,29 @@ pub async fn release(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// An artifact stored by one of the jobs this job depends on (a clip to correct,
-/// a correction's checkpoints, the debiasing model), for the current lease.
+/// Worker: read an artifact of one of the jobs this job depends on
+///
+/// A clip to correct, a correction's checkpoints, the debiasing model: any file
+/// its inputs uploaded, for the holder of the current lease.
+#[utoipa::path(
+    get,
+    path = "/internal/v1/jobs/{id}/inputs/{*name}",
+    operation_id = "getInput",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(
+        ("id" = Uuid, Path, description = "The job's id"),
+        ("name" = String, Path, description = "The artifact's name"),
+        EpochQuery,
+    ),
+    responses(
+        (status = 200, description = "bytes", content_type = "application/octet-stream", body = inline(Binary)),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+        (status = 409, response = Problem),
+        (status = 410, response = Problem),
+    )
+)]
 pub async fn get_input(
     State(state): State<AppState>,
     _: Worker,
@@ -385,6 +548,20 @@ pub async fn get_input(
     }
 }
 
+/// Worker: the clip's original file
+#[utoipa::path(
+    get,
+    path = "/internal/v1/clips/{id}/source",
+    operation_id = "getClipSource",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The clip's id")),
+    responses(
+        (status = 200, description = "bytes", content_type = "application/octet-stream", body = inline(Binary)),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn clip_source(
     State(state): State<AppState>,
     _: Worker,
@@ -399,6 +576,20 @@ pub async fn clip_source(
         .ok_or_else(|| ApiError::not_found("clip"))
 }
 
+/// Worker: the ASF of an AMC clip
+#[utoipa::path(
+    get,
+    path = "/internal/v1/clips/{id}/skeleton",
+    operation_id = "getClipSkeleton",
+    tag = "internal",
+    security(("workerToken" = [])),
+    params(("id" = Uuid, Path, description = "The clip's id")),
+    responses(
+        (status = 200, description = "bytes", content_type = "application/octet-stream", body = inline(Binary)),
+        (status = 401, response = Problem),
+        (status = 404, response = Problem),
+    )
+)]
 pub async fn clip_skeleton(
     State(state): State<AppState>,
     _: Worker,
