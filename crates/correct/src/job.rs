@@ -4,8 +4,9 @@
 //! what the character did.
 //!
 //! Training stops at the first of: the deterministic rollout reaching
-//! `target_r_norm` with an accepted mean reward, the time budget, or the
-//! iteration / sample limits. The curve is reported either way.
+//! `target_r_norm` and passing every acceptance criterion
+//! ([`crate::acceptance`]), the time budget, or the iteration / sample
+//! limits. The curve is reported either way.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -17,6 +18,7 @@ use physics::{ImitationEnv, Residual};
 use ppo::{Control, PpoConfig, RunLimits, StopReason, Trainer};
 
 use crate::CorrectError;
+use crate::acceptance::{AcceptanceConfig, Criterion, all_passed, judge};
 use crate::report::{Report, curve_svg};
 use crate::rollout::{Rollout, deterministic_rollout};
 use crate::task::ImitationTask;
@@ -34,10 +36,11 @@ pub struct CorrectConfig {
     pub max_samples: Option<u64>,
     /// Run the deterministic rollout every this many iterations.
     pub eval_every: u64,
-    /// Stop once a rollout reaches this R_norm with an accepted mean reward.
+    /// Stop once a rollout reaches this R_norm and passes every acceptance
+    /// criterion.
     pub target_r_norm: Option<f64>,
-    /// Mean per-step reward needed to accept the corrected clip (paper: 0.7).
-    pub accept_threshold: f64,
+    /// When a corrected clip is accepted ([`crate::acceptance`]).
+    pub acceptance: AcceptanceConfig,
     pub checkpoint_every_s: f64,
     pub seed: u64,
     /// Start a fresh run from the policy, value and normaliser of another job's
@@ -77,7 +80,7 @@ impl Default for CorrectConfig {
             max_samples: None,
             eval_every: 1,
             target_r_norm: Some(0.8),
-            accept_threshold: 0.7,
+            acceptance: AcceptanceConfig::default(),
             checkpoint_every_s: 120.0,
             seed: 0,
             warm_start: None,
@@ -101,12 +104,7 @@ impl CorrectConfig {
         if self.eval_every == 0 {
             return bad("eval_every must be at least 1".into());
         }
-        if !(0.0..=1.0).contains(&self.accept_threshold) {
-            return bad(format!(
-                "accept threshold {} is not in [0, 1]",
-                self.accept_threshold
-            ));
-        }
+        self.acceptance.validate()?;
         self.ppo.validate()?;
         self.physics.substeps()?;
         Ok(())
@@ -165,6 +163,7 @@ pub fn correct(
         .map(|_| ImitationEnv::new(motion, &config.physics).map(ImitationTask::new))
         .collect::<Result<Vec<_>, _>>()?;
     let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
+    let before = motion::metrics::plausibility(motion);
     let action0 = deterministic_rollout(&mut eval_env, |_, a| {
         a.fill(0.0);
         Ok(())
@@ -212,9 +211,10 @@ pub fn correct(
                     let r = rollout.r_norm();
                     trainer.record_eval(r);
                     r_norm = Some(r);
-                    let accepted = rollout.fell_at.is_none()
-                        && rollout.mean_reward() >= config.accept_threshold;
-                    reached_target = accepted && config.target_r_norm.is_some_and(|t| r >= t);
+                    // Judging costs a forward-kinematics pass over the clip:
+                    // only when the R_norm target is met.
+                    reached_target = config.target_r_norm.is_some_and(|t| r >= t)
+                        && accepted(&rollout, &before, &config.acceptance);
                 }
                 Err(err) => eval_error = Some(err),
             }
@@ -247,6 +247,8 @@ pub fn correct(
     );
 
     let final_rollout = evaluate(&trainer, &mut eval_env)?;
+    let after = motion::metrics::plausibility(&final_rollout.motion);
+    let criteria = judge(&final_rollout, &before, &after, &config.acceptance);
     let progress = trainer.progress();
     // The curve starts at the untrained tracker (action 0, which the fresh
     // policy's near-zero output layer approximates), then one point per evaluation.
@@ -274,9 +276,14 @@ pub fn correct(
         wall_s: progress.wall_s,
         iterations: progress.iterations,
         curve,
-        accepted: final_rollout.fell_at.is_none()
-            && final_rollout.mean_reward() >= config.accept_threshold,
-        accept_threshold: config.accept_threshold,
+        accepted: all_passed(&criteria),
+        rejected_because: criteria
+            .iter()
+            .filter(|c| !c.passed)
+            .map(Criterion::failure)
+            .collect(),
+        criteria,
+        accept_threshold: config.acceptance.min_mean_reward,
         fell_at: final_rollout.fell_at,
         r_norm_action0: action0.r_norm(),
         stop_reason: stop_reason.to_string(),
@@ -284,14 +291,24 @@ pub fn correct(
         fps: final_rollout.motion.fps(),
         frames: final_rollout.motion.frames(),
         warm_start: warm_from,
-        plausibility_before: motion::metrics::plausibility(motion),
-        plausibility_after: motion::metrics::plausibility(&final_rollout.motion),
+        plausibility_before: before,
+        plausibility_after: after,
     };
     write_outputs(out_dir, &final_rollout, &report)?;
     Ok(Outcome {
         motion: final_rollout.motion,
         report,
     })
+}
+
+/// Whether `rollout` passes every acceptance criterion.
+fn accepted(
+    rollout: &Rollout,
+    before: &motion::metrics::Plausibility,
+    config: &AcceptanceConfig,
+) -> bool {
+    let after = motion::metrics::plausibility(&rollout.motion);
+    all_passed(&judge(rollout, before, &after, config))
 }
 
 fn evaluate(

@@ -1,6 +1,8 @@
 //! `report.json` and the learning-curve plot written next to a corrected clip.
 
 use motion::metrics::Plausibility;
+
+use crate::acceptance::Criterion;
 use serde::{Deserialize, Serialize};
 
 /// Everything a user needs to judge one correction.
@@ -22,8 +24,15 @@ pub struct Report {
     /// Learning curve: [wall_s, samples, r_norm] of deterministic rollouts; the
     /// first point is the untrained tracker (action 0) at [0, 0, r_norm_action0].
     pub curve: Vec<[f64; 3]>,
-    /// Mean reward >= `accept_threshold` and no fall (paper: 0.7).
+    /// Every acceptance criterion passed ([`crate::acceptance`]).
     pub accepted: bool,
+    /// Each criterion with its value, limit and verdict.
+    #[serde(default)]
+    pub criteria: Vec<Criterion>,
+    /// The failed criteria, one line each (empty when accepted).
+    #[serde(default)]
+    pub rejected_because: Vec<String>,
+    /// The mean-reward limit (paper: 0.7); the others are in `criteria`.
     pub accept_threshold: f64,
     /// Control step at which the character fell in the final rollout, if it did.
     pub fell_at: Option<usize>,

@@ -299,6 +299,25 @@ pub struct MappingLine {
 }
 
 impl CharacterSpec {
+    /// The heel and toe of foot body `b`'s sole, in the body frame: the back
+    /// and front midpoints of its box's bottom face. A foot stands on its sole
+    /// when both are on the floor; standing on the heel edge (toes up) or on a
+    /// rolled box puts one of them, or both, above it. `None` when `b` is not
+    /// a box.
+    pub fn sole_points(&self, b: usize) -> Option<[Vec3; 2]> {
+        match self.bodies.get(b)?.shape {
+            Shape::Box {
+                center,
+                half_extents: h,
+                rotation,
+            } => Some([
+                center + rotation * Vec3::new(0.0, -h.y, -h.z),
+                center + rotation * Vec3::new(0.0, -h.y, h.z),
+            ]),
+            _ => None,
+        }
+    }
+
     /// Tilt each foot box so that its sole lies flat on the ground when the
     /// foot is planted in `motion`.
     ///

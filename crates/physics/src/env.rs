@@ -143,6 +143,21 @@ pub struct StepInfo {
     pub frame: usize,
 }
 
+/// How one simulated foot meets the floor (the simulated floor is y = 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FootContact {
+    /// Height of the sole's heel above the floor, m (see
+    /// [`CharacterSpec::sole_points`]; the lowest point of the foot's shape
+    /// when it is not a box).
+    pub heel_m: f32,
+    /// Height of the sole's toe above the floor, m.
+    pub toe_m: f32,
+    /// Horizontal speed of the sole's midpoint, m/s.
+    pub speed_m_s: f32,
+    /// The foot's collider touches the ground.
+    pub touching: bool,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepResult {
     pub reward: f32,
@@ -743,5 +758,29 @@ impl ImitationEnv {
     /// Current simulated state of every body.
     pub fn body_states(&self) -> &[BodyState] {
         &self.sim.state
+    }
+
+    /// How each foot (in [`CharacterSpec::feet`] order) meets the floor now.
+    pub fn foot_contacts(&self) -> Vec<FootContact> {
+        self.spec
+            .feet
+            .iter()
+            .map(|&b| {
+                let s = self.sim.state[b];
+                let [heel, toe] = self.spec.sole_points(b).unwrap_or_else(|| {
+                    let c = self.spec.bodies[b].com_local;
+                    [c, c]
+                });
+                let (heel, toe) = (s.pos + s.rot * heel, s.pos + s.rot * toe);
+                let mid = 0.5 * (heel + toe);
+                let v = s.vel + s.angvel.cross(mid - s.pos);
+                FootContact {
+                    heel_m: heel.y,
+                    toe_m: toe.y,
+                    speed_m_s: Vec3::new(v.x, 0.0, v.z).length(),
+                    touching: self.sim.touches_ground(b),
+                }
+            })
+            .collect()
     }
 }

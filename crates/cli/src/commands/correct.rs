@@ -31,6 +31,11 @@ pub struct Args {
     /// Stop early once the deterministic rollout reaches this R_norm (and is accepted).
     #[arg(long, default_value_t = 0.8)]
     target_r_norm: f64,
+    /// Accept only when the mean root residual force is at most this fraction
+    /// of body weight (the other acceptance limits are the library's; a recipe's
+    /// `[correct]` sets them all).
+    #[arg(long, default_value_t = correct::AcceptanceConfig::default().max_residual_force_ratio)]
+    max_residual_force_ratio: f64,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = 8)]
     envs: usize,
@@ -66,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         ..CorrectConfig::default()
     };
+    config.acceptance.max_residual_force_ratio = args.max_residual_force_ratio;
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = args.calibrate_feet;
@@ -102,11 +108,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let r = &outcome.report;
     eprintln!(
-        "R_norm {:.3} (action 0: {:.3}), mean reward {:.3}, residual force {:.3} m g, {} samples in {:.0} s: {}",
+        "R_norm {:.3} (action 0: {:.3}), {} samples in {:.0} s: {}",
         r.r_norm,
         r.r_norm_action0,
-        r.mean_reward,
-        r.residual_force_ratio,
         r.samples,
         r.wall_s,
         if r.accepted {
@@ -115,6 +119,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "not accepted"
         }
     );
+    for c in &r.criteria {
+        let op = if c.at_most { "<=" } else { ">=" };
+        eprintln!(
+            "  {} {:<15} {:8.3} {op} {:.3}  {}",
+            if c.passed { "pass" } else { "FAIL" },
+            c.name,
+            c.value,
+            c.limit,
+            c.meaning
+        );
+    }
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }
