@@ -66,8 +66,18 @@ impl AcceptanceConfig {
     pub fn validate(&self) -> Result<(), CorrectError> {
         let checks = [
             ("min_mean_reward", self.min_mean_reward, 0.0, 1.0),
-            ("max_residual_force_ratio", self.max_residual_force_ratio, 0.0, 100.0),
-            ("max_foot_skating_m_s", self.max_foot_skating_m_s, 0.0, 100.0),
+            (
+                "max_residual_force_ratio",
+                self.max_residual_force_ratio,
+                0.0,
+                100.0,
+            ),
+            (
+                "max_foot_skating_m_s",
+                self.max_foot_skating_m_s,
+                0.0,
+                100.0,
+            ),
             ("sole_tolerance_m", self.sole_tolerance_m, 0.0, 1.0),
             ("min_flat_fraction", self.min_flat_fraction, 0.0, 1.0),
             ("planted_speed_m_s", self.planted_speed_m_s, 0.0, 100.0),

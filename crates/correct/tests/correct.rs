@@ -142,7 +142,10 @@ fn a_clip_held_up_by_the_root_force_is_rejected() {
     let before = motion::metrics::plausibility(&clip);
     let after = motion::metrics::plausibility(&rollout.motion);
     let criteria = correct::acceptance::judge(&rollout, &before, &after, &config.acceptance);
-    let residual = criteria.iter().find(|c| c.name == "residual_force").unwrap();
+    let residual = criteria
+        .iter()
+        .find(|c| c.name == "residual_force")
+        .unwrap();
     assert!(
         rollout.residual_force_ratio() > 0.1 && !residual.passed,
         "{criteria:?}"

@@ -70,11 +70,18 @@ struct CorrectionArgs {
 }
 
 /// Corrects (or reuses) one clip into `dir`.
-fn correct_one(path: &Path, asf: &Path, dir: &Path, args: &CorrectionArgs) -> anyhow::Result<correct::Report> {
+fn correct_one(
+    path: &Path,
+    asf: &Path,
+    dir: &Path,
+    args: &CorrectionArgs,
+) -> anyhow::Result<correct::Report> {
     let done = dir.join("report.json");
     if done.is_file() {
-        let bytes = std::fs::read(&done).with_context(|| format!("cannot read {}", done.display()))?;
-        return serde_json::from_slice(&bytes).with_context(|| format!("bad report {}", done.display()));
+        let bytes =
+            std::fs::read(&done).with_context(|| format!("cannot read {}", done.display()))?;
+        return serde_json::from_slice(&bytes)
+            .with_context(|| format!("bad report {}", done.display()));
     }
     let motion = motion::io::load(
         path,
