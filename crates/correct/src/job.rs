@@ -41,6 +41,9 @@ pub struct CorrectConfig {
     pub target_r_norm: Option<f64>,
     /// When a corrected clip is accepted ([`crate::acceptance`]).
     pub acceptance: AcceptanceConfig,
+    /// Hand the balance from the PD-residual root force to the policy over
+    /// training.
+    pub residual_schedule: ResidualSchedule,
     pub checkpoint_every_s: f64,
     pub seed: u64,
     /// Start a fresh run from the policy, value and normaliser of another job's
@@ -81,6 +84,7 @@ impl Default for CorrectConfig {
             eval_every: 1,
             target_r_norm: Some(0.8),
             acceptance: AcceptanceConfig::default(),
+            residual_schedule: ResidualSchedule::default(),
             checkpoint_every_s: 120.0,
             seed: 0,
             warm_start: None,
@@ -105,8 +109,48 @@ impl CorrectConfig {
             return bad("eval_every must be at least 1".into());
         }
         self.acceptance.validate()?;
+        self.residual_schedule.validate()?;
         self.ppo.validate()?;
         self.physics.substeps()?;
+        Ok(())
+    }
+}
+
+/// The PD-residual gains over training: from MotionAug's (scale 1) down to
+/// `final_scale` of them, linearly over `over_iterations` PPO iterations, so
+/// the policy learns the balance the root force gave. The rollouts that judge
+/// the clip run at the scale reached. `final_scale` 1 keeps the gains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResidualSchedule {
+    pub final_scale: f32,
+    pub over_iterations: u64,
+}
+
+impl Default for ResidualSchedule {
+    fn default() -> Self {
+        ResidualSchedule {
+            final_scale: 1.0,
+            over_iterations: 1,
+        }
+    }
+}
+
+impl ResidualSchedule {
+    /// The gain scale after `iterations` PPO iterations.
+    pub fn scale(&self, iterations: u64) -> f32 {
+        let t = (iterations as f32 / self.over_iterations.max(1) as f32).min(1.0);
+        1.0 - (1.0 - self.final_scale) * t
+    }
+
+    fn validate(&self) -> Result<(), CorrectError> {
+        if !(self.final_scale.is_finite() && (0.0..=1.0).contains(&self.final_scale))
+            || self.over_iterations == 0
+        {
+            return Err(CorrectError::Config(format!(
+                "residual schedule: final scale {} must be in [0, 1] over at least one iteration",
+                self.final_scale
+            )));
+        }
         Ok(())
     }
 }
@@ -183,6 +227,20 @@ pub fn correct(
         trainer
     };
 
+    // Training environments run at the scale of the iteration to come; the
+    // rollouts that judge the policy at the scale it was last trained at.
+    let schedule = config.residual_schedule;
+    let train_scale = |trainer: &mut Trainer<ImitationTask>| {
+        let scale = schedule.scale(trainer.progress().iterations);
+        for task in trainer.envs_mut() {
+            task.env.set_residual_scale(scale);
+        }
+    };
+    let judged_scale = |trainer: &Trainer<ImitationTask>| {
+        schedule.scale(trainer.progress().iterations.saturating_sub(1))
+    };
+    train_scale(&mut trainer);
+
     let limits = RunLimits {
         time_budget_s: Some(config.time_budget_s),
         max_iterations: config.max_iterations,
@@ -206,6 +264,7 @@ pub fn correct(
     let reason = trainer.run(&limits, |trainer, it| {
         let mut r_norm = None;
         if it.iteration % config.eval_every == 0 {
+            eval_env.set_residual_scale(judged_scale(trainer));
             match evaluate(trainer, &mut eval_env) {
                 Ok(rollout) => {
                     let r = rollout.r_norm();
@@ -219,6 +278,7 @@ pub fn correct(
                 Err(err) => eval_error = Some(err),
             }
         }
+        train_scale(trainer);
         on_progress(&ProgressEvent {
             iteration: it.iteration,
             samples: it.samples,
@@ -246,6 +306,7 @@ pub fn correct(
         "training stopped"
     );
 
+    eval_env.set_residual_scale(judged_scale(&trainer));
     let final_rollout = evaluate(&trainer, &mut eval_env)?;
     let after = motion::metrics::plausibility(&final_rollout.motion);
     let criteria = judge(&final_rollout, &before, &after, &config.acceptance);
@@ -288,6 +349,7 @@ pub fn correct(
         r_norm_action0: action0.r_norm(),
         stop_reason: stop_reason.to_string(),
         residual: residual_name(config.physics.residual).to_string(),
+        residual_scale: eval_env.residual_scale() as f64,
         fps: final_rollout.motion.fps(),
         frames: final_rollout.motion.frames(),
         warm_start: warm_from,
@@ -356,4 +418,28 @@ fn write_outputs(out_dir: &Path, rollout: &Rollout, report: &Report) -> Result<(
         motion::io::write_atomic(&path, &bytes)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_residual_schedule_lowers_the_gains_linearly_then_holds() {
+        let s = ResidualSchedule {
+            final_scale: 0.2,
+            over_iterations: 4,
+        };
+        let scales: Vec<f32> = (0..7).map(|i| s.scale(i)).collect();
+        let want = [1.0, 0.8, 0.6, 0.4, 0.2, 0.2, 0.2];
+        for (got, want) in scales.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{scales:?}");
+        }
+        assert_eq!(ResidualSchedule::default().scale(1000), 1.0);
+        let bad = ResidualSchedule {
+            final_scale: 1.5,
+            over_iterations: 4,
+        };
+        assert!(bad.validate().is_err());
+    }
 }

@@ -62,7 +62,7 @@ pub mod summary;
 pub mod task;
 
 pub use acceptance::{AcceptanceConfig, Criterion};
-pub use job::{CorrectConfig, Outcome, correct};
+pub use job::{CorrectConfig, Outcome, ResidualSchedule, correct};
 pub use report::Report;
 pub use rollout::{Rollout, deterministic_rollout};
 

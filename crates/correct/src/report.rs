@@ -42,6 +42,10 @@ pub struct Report {
     pub stop_reason: String,
     /// Root force used: pd, none or learned.
     pub residual: String,
+    /// Factor on the PD-residual gains in the rollout that produced the clip
+    /// (1 = MotionAug's; lower after a schedule handed balance to the policy).
+    #[serde(default = "one")]
+    pub residual_scale: f64,
     /// Frame rate of the corrected clip (the control rate).
     pub fps: f64,
     pub frames: usize,
@@ -50,6 +54,10 @@ pub struct Report {
     pub warm_start: Option<String>,
     pub plausibility_before: Plausibility,
     pub plausibility_after: Plausibility,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// The learning curve (R_norm against wall time) as a small standalone SVG.

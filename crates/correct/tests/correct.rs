@@ -156,6 +156,28 @@ fn a_clip_held_up_by_the_root_force_is_rejected() {
     assert!(soles.planted_frames > 10, "{soles:?}");
 }
 
+/// Feet built in the frame of the standing foot stand on their soles: with
+/// the untrained tracker on the bundled kick, the rest-pose boxes stand on a
+/// corner (no planted frame flat) and the calibrated ones mostly flat.
+#[test]
+fn calibrated_feet_stand_on_their_soles() {
+    let clip = kick();
+    let flat = |calibrate: bool| {
+        let mut config = CorrectConfig::default();
+        config.physics.character.calibrate_feet = calibrate;
+        let mut env = physics::ImitationEnv::new(&clip, &config.physics).unwrap();
+        let rollout = correct::deterministic_rollout(&mut env, |_, a| {
+            a.fill(0.0);
+            Ok(())
+        })
+        .unwrap();
+        correct::acceptance::SoleStats::of(&rollout.feet, &config.acceptance)
+    };
+    let (rest, calibrated) = (flat(false), flat(true));
+    assert!(rest.flat_fraction() < 0.1, "{rest:?}");
+    assert!(calibrated.flat_fraction() > 0.5, "{calibrated:?}");
+}
+
 #[test]
 fn bad_settings_are_rejected_before_any_work() {
     let dir = tempfile::tempdir().unwrap();

@@ -318,16 +318,22 @@ impl CharacterSpec {
         }
     }
 
-    /// Tilt each foot box so that its sole lies flat on the ground when the
-    /// foot is planted in `motion`.
+    /// Rebuild each foot box in the frame of the standing foot, so that its
+    /// sole lies flat on the ground when the foot is planted in `motion`.
     ///
     /// The boxes are built from the rest pose, whose foot is rarely the
     /// standing foot: HDM05's rest foot points 22 degrees down, its planted
-    /// feet about 31 degrees, so an uncalibrated box stands on its toe edge
-    /// and pivots. Stance frames are those where the ankle is within
-    /// 2 cm of its lowest height over the clip and moves slower than 0.3 m/s
-    /// horizontally; the box is turned about the ankle so that its up
-    /// axis is the mean world-up direction (in the foot's frame) over them.
+    /// feet about 31 degrees, and the data's foot twist is free (the toe is a
+    /// leaf), so on the bundled kick the uncalibrated stance box stands on
+    /// its toe corner, heel 18 cm up. Stance frames are those where the ankle
+    /// is within 2 cm of its lowest height over the clip and moves slower
+    /// than 0.3 m/s horizontally. In the foot's own frame the box gets:
+    /// * up: the mean world-up direction over the stance frames;
+    /// * forward (its long axis): towards the foot point farthest from the
+    ///   ankle across that up direction (the toe), so heel and toe lie along it;
+    /// * its sole through the lowest foot point along up, its front at the
+    ///   toe, its back, width and height those of the rest-pose box.
+    ///
     /// Feet never planted keep the rest-pose box.
     pub fn calibrate_feet(&mut self, motion: &Motion) -> Vec<FootCalibration> {
         let n = motion.frames();
@@ -347,52 +353,22 @@ impl CharacterSpec {
         }
         let mut out = Vec::new();
         for (i, &b) in feet.iter().enumerate() {
-            let shape = self.bodies[b].shape;
-            let Shape::Box {
-                center,
-                half_extents,
-                rotation,
-            } = shape
-            else {
+            let Some((up, count)) = stance_up(&poses[i], dt as f32) else {
                 continue;
             };
-            // The ankle, not the box: a rest-pose box tilted in the swing can dip
-            // lower than in stance.
-            let lows: Vec<f32> = poses[i].iter().map(|(p, _)| p.y).collect();
-            let floor = lows.iter().copied().fold(f32::INFINITY, f32::min);
-            let mut up = Vec3::ZERO;
-            let mut count = 0;
-            for t in 0..n {
-                let (p, q) = poses[i][t];
-                let other = if t + 1 < n {
-                    poses[i][t + 1].0
-                } else {
-                    poses[i][t - 1].0
-                };
-                let v = (other - p) / dt as f32;
-                let slow = Vec3::new(v.x, 0.0, v.z).length() < 0.3;
-                if lows[t] < floor + 0.02 && slow {
-                    up += q.inverse() * Vec3::Y;
-                    count += 1;
+            let points = self.foot_points(b);
+            let Some(calibrated) = standing_box(&self.bodies[b].shape, &points, up) else {
+                continue;
+            };
+            let tilt = match (self.bodies[b].shape, calibrated) {
+                (Shape::Box { rotation: a, .. }, Shape::Box { rotation: c, .. }) => {
+                    a.angle_between(c)
                 }
-            }
-            if count < 3 || up.length() < 1e-6 {
-                continue;
-            }
-            let target = up.normalize();
-            let current = rotation * Vec3::Y;
-            let delta = Quat::from_rotation_arc(current, target);
-            let tilt = delta.angle_between(Quat::IDENTITY);
-            if !tilt.is_finite() {
-                continue;
-            }
-            let body = &mut self.bodies[b];
-            body.shape = Shape::Box {
-                center: delta * center,
-                half_extents,
-                rotation: (delta * rotation).normalize(),
+                _ => 0.0,
             };
-            body.com_local = body.shape.center();
+            let body = &mut self.bodies[b];
+            body.shape = calibrated;
+            body.com_local = calibrated.center();
             out.push(FootCalibration {
                 body: b,
                 stance_frames: count,
@@ -400,6 +376,27 @@ impl CharacterSpec {
             });
         }
         out
+    }
+
+    /// The rest-pose positions of foot body `b`'s joints and end sites,
+    /// relative to its origin (the body frame: rest orientations are the
+    /// identity).
+    fn foot_points(&self, b: usize) -> Vec<Vec3> {
+        let sk = &self.skeleton;
+        let rest = sk.rest_positions();
+        let origin = rest[self.bodies[b].driver];
+        let mut points = Vec::new();
+        for (j, m) in self.joint_map.iter().enumerate() {
+            let mine = matches!(*m, JointMapping::Body(x) | JointMapping::MergedInto(x) if x == b);
+            if !mine {
+                continue;
+            }
+            points.push((rest[j] - origin).as_vec3());
+            if let Some(e) = sk.joint(j).end_site {
+                points.push((rest[j] + e - origin).as_vec3());
+            }
+        }
+        points
     }
 
     /// File joint -> simulated body (or the body it is merged into).
@@ -433,4 +430,60 @@ impl CharacterSpec {
         let parts = rest.find_parts()?;
         bodies::assemble(&rest, &parts, skeleton.clone(), opts)
     }
+}
+
+/// The mean world-up direction in the foot's frame over its stance frames
+/// (ankle within 2 cm of its lowest height, slower than 0.3 m/s
+/// horizontally) and how many there were; `None` with fewer than 3.
+fn stance_up(poses: &[(Vec3, Quat)], dt: f32) -> Option<(Vec3, usize)> {
+    let n = poses.len();
+    let floor = poses.iter().map(|(p, _)| p.y).fold(f32::INFINITY, f32::min);
+    let mut up = Vec3::ZERO;
+    let mut count = 0;
+    for t in 0..n {
+        let (p, q) = poses[t];
+        let other = if t + 1 < n {
+            poses[t + 1].0
+        } else {
+            poses[t - 1].0
+        };
+        let v = (other - p) / dt;
+        if p.y < floor + 0.02 && Vec3::new(v.x, 0.0, v.z).length() < 0.3 {
+            up += q.inverse() * Vec3::Y;
+            count += 1;
+        }
+    }
+    (count >= 3 && up.length() > 1e-6).then(|| (up.normalize(), count))
+}
+
+/// A foot box with sole normal `up` (body frame): long axis towards the
+/// farthest of `points` across `up`, sole through the lowest point along
+/// `up`, back, width and height from `rest` (the rest-pose box).
+fn standing_box(rest: &Shape, points: &[Vec3], up: Vec3) -> Option<Shape> {
+    let Shape::Box {
+        center,
+        half_extents: h,
+        rotation,
+    } = *rest
+    else {
+        return None;
+    };
+    let across = |p: Vec3| p - up * p.dot(up);
+    let toe = points
+        .iter()
+        .copied()
+        .max_by(|a, b| across(*a).length().total_cmp(&across(*b).length()))?;
+    let forward = across(toe).try_normalize()?;
+    let lateral = up.cross(forward);
+    let front = points.iter().map(|p| p.dot(forward)).fold(0.0f32, f32::max);
+    let back = center.dot(rotation * Vec3::Z) - h.z;
+    let sole = points.iter().map(|p| p.dot(up)).fold(0.0f32, f32::min);
+    let half_height = 0.5 * (-sole).max(2.0 * h.y);
+    let center = forward * (0.5 * (front + back)) + up * (sole + half_height);
+    let basis = Mat3::from_cols(lateral, up, forward);
+    Some(Shape::Box {
+        center,
+        half_extents: Vec3::new(h.x, half_height, 0.5 * (front - back)),
+        rotation: Quat::from_mat3(&basis).normalize(),
+    })
 }

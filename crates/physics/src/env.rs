@@ -189,6 +189,9 @@ pub struct ImitationEnv {
     recorded: Vec<(Vec3, Quat)>,
     recorded_frames: Vec<usize>,
     record: bool,
+    /// Factor on the PD-residual gains (1 = MotionAug's; see
+    /// [`ImitationEnv::set_residual_scale`]).
+    residual_scale: f32,
 }
 
 /// What the physics substeps of one control step did.
@@ -281,6 +284,7 @@ impl ImitationEnv {
             recorded: Vec::new(),
             recorded_frames: Vec::new(),
             record: true,
+            residual_scale: 1.0,
             spec,
         };
         env.reset(0.0);
@@ -333,6 +337,21 @@ impl ImitationEnv {
     /// Current observation.
     pub fn obs(&self) -> &[f32] {
         &self.obs
+    }
+
+    /// Scale the PD-residual gains by `scale` (in [0, 1]; 1 by default): a
+    /// training schedule lowers it so that the policy, not the root force,
+    /// learns to keep the balance. Takes effect at the next step.
+    pub fn set_residual_scale(&mut self, scale: f32) {
+        self.residual_scale = if scale.is_finite() {
+            scale.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+    }
+
+    pub fn residual_scale(&self) -> f32 {
+        self.residual_scale
     }
 
     /// Turn recording of simulated frames on or off (on by default).
@@ -566,7 +585,7 @@ impl ImitationEnv {
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.
     fn pd_residual(&self, r: &BodyState, root: &BodyState) -> (Vec3, Vec3) {
-        let [kp, kd, kpr, kdr] = self.config.residual_gains;
+        let [kp, kd, kpr, kdr] = self.config.residual_gains.map(|g| g * self.residual_scale);
         (
             kp * (r.pos - root.pos) + kd * (r.vel - root.vel),
             kpr * axis_angle(r.rot * root.rot.inverse()) + kdr * (r.angvel - root.angvel),

@@ -23,7 +23,7 @@ pub struct CorrectionSummary {
     #[serde(default)]
     pub criteria: Vec<correct::Criterion>,
     /// The failed criteria, one line each (empty when accepted).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(default)]
     pub rejected_because: Vec<String>,
     /// The job's report, relative to the output directory (CLI only).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -64,6 +64,11 @@ struct CorrectionArgs {
     /// Tilt the foot boxes flat in the clip's stance frames.
     #[arg(long)]
     calibrate_feet: bool,
+    /// PD-residual gains lowered to this fraction over `--residual-anneal-iterations`.
+    #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.final_scale)]
+    residual_final_scale: f32,
+    #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.over_iterations)]
+    residual_anneal_iterations: u64,
     /// Output folder: one correction folder per clip, table.md, table.json.
     #[arg(long)]
     out: PathBuf,
@@ -97,6 +102,10 @@ fn correct_one(
     };
     config.ppo.threads = args.threads;
     config.physics.character.calibrate_feet = args.calibrate_feet;
+    config.residual_schedule = correct::ResidualSchedule {
+        final_scale: args.residual_final_scale,
+        over_iterations: args.residual_anneal_iterations,
+    };
     let resume = dir.join("checkpoints").is_dir();
     let name = crate::input::clip_name(path);
     Ok(correct::correct(&motion, &name, &config, dir, resume, |_| {})?.report)

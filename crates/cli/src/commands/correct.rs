@@ -37,6 +37,12 @@ pub struct Args {
     /// `[correct]` sets them all).
     #[arg(long, default_value_t = CorrectConfig::default().acceptance.max_residual_force_ratio)]
     max_residual_force_ratio: f64,
+    /// Lower the PD-residual gains linearly to this fraction of MotionAug's over
+    /// `--residual-anneal-iterations` PPO iterations (1 keeps them).
+    #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.final_scale)]
+    residual_final_scale: f32,
+    #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.over_iterations)]
+    residual_anneal_iterations: u64,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
@@ -74,6 +80,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..defaults
     };
     config.acceptance.max_residual_force_ratio = args.max_residual_force_ratio;
+    config.residual_schedule = correct::ResidualSchedule {
+        final_scale: args.residual_final_scale,
+        over_iterations: args.residual_anneal_iterations,
+    };
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = args.calibrate_feet;
