@@ -293,7 +293,8 @@ fn run_cell(
     ));
     if config.predict {
         for &model in &config.models {
-            let (zero_velocity, by_condition) = predict_conditions(config, model, &split, &sets, &log)?;
+            let (zero_velocity, by_condition) =
+                predict_conditions(config, model, &split, &sets, &log)?;
             cell.zero_velocity = Some(zero_velocity);
             cell.predict.insert(model.to_string(), by_condition);
         }

@@ -217,9 +217,12 @@ pub fn correct_and_debias(
                     report.r_norm_action0,
                     report.r_norm,
                     report.samples,
-                    if report.accepted { "accepted" } else { "rejected" },
-                    seen.job_started
-                        .map_or(0.0, |t| t.elapsed().as_secs_f64())
+                    if report.accepted {
+                        "accepted"
+                    } else {
+                        "rejected"
+                    },
+                    seen.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
                 ));
                 if report.accepted && matches!(job.kind, pipeline::JobKind::Correct { .. }) {
                     seen.corrected.insert(name.to_string(), motion.clone());
@@ -343,7 +346,11 @@ pub fn correct_and_debias(
 fn warm_start_line(originals: &[String], reports: &HashMap<String, correct::Report>) -> String {
     let outcomes: Vec<(bool, f64)> = originals
         .iter()
-        .map(|n| reports.get(n).map_or((false, f64::NEG_INFINITY), |r| (r.accepted, r.r_norm)))
+        .map(|n| {
+            reports
+                .get(n)
+                .map_or((false, f64::NEG_INFINITY), |r| (r.accepted, r.r_norm))
+        })
         .collect();
     let Some(best) = pipeline::stages::best_warm_start(&outcomes) else {
         return "warm start: no original to start from".into();
