@@ -404,3 +404,57 @@ fn predict_conditions(
     }
     Ok((test.zero_velocity(), by_condition))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> TableConfig {
+        TableConfig {
+            data: "data".into(),
+            work: "work".into(),
+            ..TableConfig::default()
+        }
+    }
+
+    #[test]
+    fn the_physics_set_needs_the_vae_set() {
+        let mut c = config();
+        assert!(c.validate().is_ok());
+        c.sets = vec![SetKind::Physics];
+        assert!(matches!(c.validate(), Err(EvalError::PhysicsNeedsVae)));
+        c.sets.push(SetKind::Vae);
+        assert!(c.validate().is_ok());
+        c.train.epochs = Some(0.0);
+        assert!(matches!(c.validate(), Err(EvalError::Config(_))));
+        assert!(matches!(
+            TableConfig::default().validate(),
+            Err(EvalError::Config(_))
+        ));
+    }
+
+    #[test]
+    fn set_kinds_read_and_print_as_the_json_names_them() {
+        for k in [SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::Physics] {
+            assert_eq!(k.to_string().parse::<SetKind>(), Ok(k));
+            assert_eq!(
+                serde_json::to_value(k).ok(),
+                Some(serde_json::Value::String(k.to_string()))
+            );
+        }
+        assert!("vaee".parse::<SetKind>().is_err());
+    }
+
+    #[test]
+    fn a_config_survives_json_and_missing_fields_are_the_defaults() {
+        let mut c = config();
+        c.sets.push(SetKind::Physics);
+        c.physics.correct_count = Some(3);
+        let text = serde_json::to_string(&c).expect("serialises");
+        assert_eq!(serde_json::from_str::<TableConfig>(&text).ok(), Some(c));
+        assert_eq!(
+            serde_json::from_str::<TableConfig>("{}").ok(),
+            Some(TableConfig::default())
+        );
+    }
+}

@@ -229,3 +229,95 @@ fn correction_table(md: &mut String, actor: &str, row_cells: &[&TableCell]) {
     }
     md.push('\n');
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+    use crate::predict::protocol::{ConditionResult, ModelKind};
+    use crate::table::{PhysicsSummary, TableConfig};
+
+    fn horizons(base: f64) -> BTreeMap<String, f64> {
+        [("100", base), ("200", base + 1.0), ("400", base + 2.0)]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect()
+    }
+
+    fn table() -> Table {
+        let no_aug = ConditionResult {
+            errors: horizons(1.0),
+            per_seed: vec![horizons(1.0)],
+            train_clips: 3,
+            train_windows: 10,
+            skipped_clips: 0,
+            train_seconds: vec![0.1],
+            first_loss: 1.0,
+            last_loss: 0.5,
+        };
+        let cell = TableCell {
+            class: "kick".into(),
+            test_actor: "bd".into(),
+            train_clips: 3,
+            test_clips: 1,
+            zero_velocity: Some(horizons(0.5)),
+            predict: [(
+                "gcn".to_string(),
+                [("no_aug".to_string(), no_aug)].into_iter().collect(),
+            )]
+            .into_iter()
+            .collect(),
+            physics: Some(PhysicsSummary {
+                originals: 3,
+                originals_accepted: 2,
+                samples: 4,
+                samples_accepted: 1,
+                ..PhysicsSummary::default()
+            }),
+            ..TableCell::default()
+        };
+        Table {
+            config: TableConfig {
+                classes: vec!["kick".into()],
+                models: vec![ModelKind::Seq2seq, ModelKind::Gcn],
+                ..TableConfig::default()
+            },
+            cells: vec![cell],
+            seconds: 12.0,
+        }
+    }
+
+    #[test]
+    fn markdown_has_a_table_per_trained_model_and_the_correction() {
+        let md = table().to_markdown();
+        assert!(
+            md.starts_with("# motionaug eval table\n\nConfig: `{"),
+            "{md}"
+        );
+        assert!(md.contains("`; 12 s.\n"), "{md}");
+        // Only the model that was trained gets a table.
+        assert!(!md.contains("seq2seq, test actor"), "{md}");
+        assert!(md.contains(
+            "## Prediction error, gcn, test actor bd (Euler, rad; 100 / 200 / 400 ms)\n\n\
+             | condition | kick (3/1 clips) |\n|---|---|\n\
+             | zero_velocity | 0.500 / 1.500 / 2.500 |\n\
+             | no_aug | 1.000 / 2.000 / 3.000 |\n"
+        ));
+        assert!(md.contains("## Correction, test actor bd"), "{md}");
+        assert!(md.contains("| kick | 2/3 | 1/4 |"), "{md}");
+    }
+
+    #[test]
+    fn json_records_what_shapes_the_numbers() {
+        let t = table();
+        let v = t.to_json();
+        assert_eq!(v["seconds"], 12.0);
+        assert_eq!(v["config"]["models"], json!(["seq2seq", "gcn"]));
+        assert_eq!(v["config"]["sets"], json!(["noise", "ik", "vae"]));
+        // No physics set, no physics config; no paths.
+        assert!(v["config"]["physics"].is_null());
+        assert!(v["config"].get("data").is_none());
+        assert_eq!(v["cells"][0]["physics"]["samples"], 4);
+    }
+}
