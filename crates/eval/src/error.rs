@@ -21,6 +21,13 @@ pub enum EvalError {
     Data(String),
     #[error("augmentation failed: {0}")]
     Augmentation(Box<dyn std::error::Error + Send + Sync>),
+    #[error("the augmentation pipeline failed: {0}")]
+    Pipeline(#[from] pipeline::PipelineError),
+    /// The table's physics set corrects the VAE's samples.
+    #[error("invalid configuration: the physics set corrects the VAE's samples: add the vae set")]
+    PhysicsNeedsVae,
+    #[error("physical correction failed: {0}")]
+    Correction(String),
 }
 
 pub type Result<T> = std::result::Result<T, EvalError>;
