@@ -376,7 +376,10 @@ fn residual_scale_scales_the_root_force() {
     // The first step starts from the same state (the reference's), so its
     // force halves exactly; later states differ with the force applied.
     assert!(full[1] > 0.0, "{full:?}");
-    assert!((half[0] - 0.5 * full[0]).abs() <= 1e-4 * full[0].max(1.0), "{half:?} {full:?}");
+    assert!(
+        (half[0] - 0.5 * full[0]).abs() <= 1e-4 * full[0].max(1.0),
+        "{half:?} {full:?}"
+    );
     let mut env = ImitationEnv::new(&motion, &Config::default()).unwrap();
     env.set_residual_scale(7.0);
     assert_eq!(env.residual_scale(), 1.0);

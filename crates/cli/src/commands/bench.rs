@@ -33,9 +33,10 @@ enum What {
         seconds: f64,
         #[arg(long)]
         json: bool,
-        /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+        /// Keep the rest-pose foot boxes instead of building them in the standing
+        /// foot's frame (an ablation).
         #[arg(long)]
-        calibrate_feet: bool,
+        rest_feet: bool,
     },
     /// Correct clips of each class and tabulate acceptance, plausibility and wall time.
     Correction(CorrectionArgs),
@@ -61,9 +62,9 @@ struct CorrectionArgs {
     /// Rollout threads per clip.
     #[arg(long, default_value_t = correct::CorrectConfig::default().ppo.threads)]
     threads: usize,
-    /// Tilt the foot boxes flat in the clip's stance frames.
+    /// Keep the rest-pose foot boxes (an ablation).
     #[arg(long)]
-    calibrate_feet: bool,
+    rest_feet: bool,
     /// PD-residual gains lowered to this fraction over `--residual-anneal-iterations`.
     #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.final_scale)]
     residual_final_scale: f32,
@@ -101,7 +102,7 @@ fn correct_one(
         ..correct::CorrectConfig::default()
     };
     config.ppo.threads = args.threads;
-    config.physics.character.calibrate_feet = args.calibrate_feet;
+    config.physics.character.calibrate_feet = !args.rest_feet;
     config.residual_schedule = correct::ResidualSchedule {
         final_scale: args.residual_final_scale,
         over_iterations: args.residual_anneal_iterations,
@@ -159,11 +160,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             input,
             seconds,
             json,
-            calibrate_feet,
+            rest_feet,
         } => {
             let motion = input.load(&clip)?;
             let mut config = physics::Config::default();
-            config.character.calibrate_feet = calibrate_feet;
+            config.character.calibrate_feet = !rest_feet;
             let report = physics::bench::bench_physics_for(&motion, &config, seconds)?;
             let text = if json {
                 serde_json::to_string_pretty(&report)? + "\n"

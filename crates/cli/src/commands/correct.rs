@@ -58,9 +58,10 @@ pub struct Args {
     /// the source clip's for a synthesised variant of it.
     #[arg(long, value_name = "CHECKPOINTS")]
     warm_start: Option<PathBuf>,
-    /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+    /// Keep the rest-pose foot boxes instead of building them in the standing
+    /// foot's frame (an ablation).
     #[arg(long)]
-    calibrate_feet: bool,
+    rest_feet: bool,
     /// Write the corrected clip at the input's own height (the simulated floor
     /// at its median-frame foot level) instead of standing on y = 0; for data
     /// whose floor is not y = 0.
@@ -86,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();
-    config.physics.character.calibrate_feet = args.calibrate_feet;
+    config.physics.character.calibrate_feet = !args.rest_feet;
     if args.keep_clip_height {
         config.physics.output_frame = physics::OutputFrame::Clip;
     }
