@@ -109,6 +109,10 @@ impl CorrectConfig {
             return bad("eval_every must be at least 1".into());
         }
         self.acceptance.validate()?;
+        let w = self.physics.sole_reward_weight;
+        if !(w.is_finite() && (0.0..=0.9).contains(&w)) {
+            return bad(format!("sole reward weight {w} is not in [0, 0.9]"));
+        }
         self.residual_schedule.validate()?;
         self.ppo.validate()?;
         self.physics.substeps()?;

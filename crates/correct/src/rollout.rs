@@ -20,6 +20,8 @@ pub const GRAVITY: f64 = 9.8;
 pub struct Rollout {
     /// Control steps of the whole clip (T).
     pub clip_steps: usize,
+    /// MotionAug's per-step reward (`0.9 r_imit + 0.1 r_res`), whatever the
+    /// training reward adds.
     pub rewards: Vec<f32>,
     pub r_imit: Vec<f32>,
     /// |F_res| per simulated step, N.
@@ -72,7 +74,7 @@ where
         act(&obs, &mut action)?;
         let step = env.step(&action)?;
         obs.copy_from_slice(env.obs());
-        rewards.push(step.reward);
+        rewards.push(step.info.paper_reward);
         r_imit.push(step.r_imit);
         residual_force.push(step.info.residual_force);
         feet.push(env.foot_contacts());

@@ -17,7 +17,10 @@
 //! * **Reward**: `r_imit = 0.5 exp(-2 E_pose) + 0.2 exp(-0.005 E_vel) +
 //!   0.2 exp(-5 E_ee) + 0.1 exp(-100 E_com)`, `r = 0.9 r_imit + 0.1 r_res`,
 //!   `r_res = exp(-0.01 |[F; tau]|)` (1 without residual force). Both are 0 on
-//!   the step that ends in a fall.
+//!   the step that ends in a fall. With `sole_reward_weight` w > 0 (0.2 by
+//!   default) the training reward is `(0.9 - w) r_imit + 0.1 r_res + w r_sole`,
+//!   `r_sole` rewarding touching feet for heel and toe on the floor; the
+//!   paper's reward stays in [`StepInfo::paper_reward`] for acceptance.
 //! * **Termination**: a non-foot body touches the ground while the same body
 //!   of the reference is not within `contact_tolerance` of the floor (a fall),
 //!   or the clip ends.
@@ -79,6 +82,17 @@ pub struct Config {
     pub character: CharacterOptions,
     /// A non-foot body may touch the ground when the reference body is this close to it (m).
     pub contact_tolerance: f32,
+    /// Weight of the sole reward `r_sole` (taken from the imitation term's
+    /// 0.9): feet touching the ground are rewarded for heel and toe on it,
+    /// `r_sole = exp(-sum (h_heel^2 + h_toe^2) / sole_scale_m^2)` over the
+    /// touching feet (1 with none). 0 = MotionAug's reward. 0.2 by default:
+    /// with the residual schedule, 60 PPO iterations on HDM05 bd kick 001 and
+    /// jog 001 (`motionaug bench correction`) put 63 % -> 92 % and 62 % -> 81 %
+    /// of planted foot frames on the sole, and the kick became the first clip
+    /// accepted under every criterion (R_norm 0.889 -> 0.877).
+    pub sole_reward_weight: f32,
+    /// Height scale of the sole reward, m.
+    pub sole_scale_m: f32,
     /// Recompute the PD-residual force at every physics step instead of once
     /// per control step (the reference computes it once per policy step).
     pub residual_every_substep: bool,
@@ -109,6 +123,8 @@ impl Default for Config {
             learned_scale: 100.0,
             character: CharacterOptions::default(),
             contact_tolerance: 0.1,
+            sole_reward_weight: 0.2,
+            sole_scale_m: 0.02,
             residual_every_substep: false,
             output_frame: OutputFrame::Ground,
         }
@@ -139,6 +155,10 @@ pub struct StepInfo {
     /// |tau| of the root residual torque (N m).
     pub residual_torque: f32,
     pub fell: bool,
+    /// MotionAug's reward of the step, `0.9 r_imit + 0.1 r_res` (0 on a
+    /// fall), whatever the training reward's extra terms: what acceptance
+    /// judges.
+    pub paper_reward: f32,
     /// Reference frame index after the step.
     pub frame: usize,
 }
@@ -553,6 +573,11 @@ impl ImitationEnv {
                 (-0.01 * (f * f + t * t).sqrt()).exp()
             }
         };
+        let r_sole = if self.config.sole_reward_weight > 0.0 {
+            self.sole_reward()
+        } else {
+            1.0
+        };
         let mut broken = false;
         for v in &mut self.obs {
             if !v.is_finite() {
@@ -564,7 +589,8 @@ impl ImitationEnv {
         let (reward, r_imit) = if fell || broken || !r_imit.is_finite() {
             (0.0, 0.0)
         } else {
-            (0.9 * r_imit + 0.1 * r_res, r_imit)
+            let w = self.config.sole_reward_weight;
+            ((0.9 - w) * r_imit + 0.1 * r_res + w * r_sole, r_imit)
         };
         let terminated = fell || broken;
         let truncated = !terminated && self.frame + 1 >= self.reference.len();
@@ -578,9 +604,35 @@ impl ImitationEnv {
                 residual_force: run.mean_force,
                 residual_torque: run.mean_torque,
                 fell,
+                paper_reward: if reward > 0.0 {
+                    0.9 * r_imit + 0.1 * r_res
+                } else {
+                    0.0
+                },
                 frame: self.frame,
             },
         }
+    }
+
+    /// `exp(-sum (h_heel^2 + h_toe^2) / scale^2)` over the feet touching the
+    /// ground (heights above the floor, 0 below it); 1 when none touches.
+    fn sole_reward(&self) -> f32 {
+        let mut e = 0.0;
+        for &b in &self.spec.feet {
+            if !self.sim.touches_ground(b) {
+                continue;
+            }
+            let Some(points) = self.spec.sole_points(b) else {
+                continue;
+            };
+            let s = self.sim.state[b];
+            for p in points {
+                let h = (s.pos + s.rot * p).y.max(0.0);
+                e += h * h;
+            }
+        }
+        let scale = self.config.sole_scale_m.max(1e-4);
+        (-e / (scale * scale)).exp()
     }
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.

@@ -70,6 +70,9 @@ struct CorrectionArgs {
     residual_final_scale: f32,
     #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.over_iterations)]
     residual_anneal_iterations: u64,
+    /// Weight of the sole reward (0 = MotionAug's reward).
+    #[arg(long, default_value_t = correct::CorrectConfig::default().physics.sole_reward_weight)]
+    sole_reward_weight: f32,
     /// Output folder: one correction folder per clip, table.md, table.json.
     #[arg(long)]
     out: PathBuf,
@@ -103,6 +106,7 @@ fn correct_one(
     };
     config.ppo.threads = args.threads;
     config.physics.character.calibrate_feet = !args.rest_feet;
+    config.physics.sole_reward_weight = args.sole_reward_weight;
     config.residual_schedule = correct::ResidualSchedule {
         final_scale: args.residual_final_scale,
         over_iterations: args.residual_anneal_iterations,

@@ -43,6 +43,10 @@ pub struct Args {
     residual_final_scale: f32,
     #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.over_iterations)]
     residual_anneal_iterations: u64,
+    /// Weight of the sole reward (feet touching the ground rewarded for heel
+    /// and toe on it; 0 = MotionAug's reward).
+    #[arg(long, default_value_t = CorrectConfig::default().physics.sole_reward_weight)]
+    sole_reward_weight: f32,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
@@ -86,6 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         over_iterations: args.residual_anneal_iterations,
     };
     config.physics.residual = args.residual;
+    config.physics.sole_reward_weight = args.sole_reward_weight;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = !args.rest_feet;
     if args.keep_clip_height {
