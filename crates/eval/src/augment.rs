@@ -85,14 +85,7 @@ pub fn apply_recipe(
     log: Log,
 ) -> Result<Vec<(String, Motion)>> {
     let start = Instant::now();
-    let clips: Vec<pipeline::Clip> = train
-        .iter()
-        .map(|(name, m)| pipeline::Clip {
-            name: name.clone(),
-            source: name.clone(),
-            motion: m.clone(),
-        })
-        .collect();
+    let clips = pipeline::Clip::all_from(train);
     let temp = std::env::temp_dir().join(format!("motionaug-eval-{}", std::process::id()));
     let work_dir = work.unwrap_or(&temp);
     let on_event = |event: pipeline::Event<'_>| {

@@ -194,6 +194,7 @@ fn learned_residual_applies_the_scaled_action_and_env_is_send() {
     let motion = sway(cmu_humanoid(), 1.0, 120.0);
     let cfg = Config {
         residual: physics::Residual::Learned,
+        sole_reward_weight: 0.0,
         ..Default::default()
     };
     let mut env = ImitationEnv::new(&motion, &cfg).unwrap();
@@ -202,6 +203,10 @@ fn learned_residual_applies_the_scaled_action_and_env_is_send() {
     action[n - 6] = 0.3;
     action[n - 5] = 0.4;
     let r = env.step(&action).unwrap();
+    assert_eq!(
+        r.reward, r.info.paper_reward,
+        "MotionAug's reward without the sole term"
+    );
     assert!(
         (r.info.residual_force - 50.0).abs() < 1e-3,
         "{}",
@@ -210,6 +215,22 @@ fn learned_residual_applies_the_scaled_action_and_env_is_send() {
     assert_eq!(r.info.residual_torque, 0.0);
     // r_res = exp(-0.01 * 50) enters the reward with weight 0.1.
     assert!((r.reward - (0.9 * r.r_imit + 0.1 * (-0.5f32).exp())).abs() < 1e-5);
+
+    // With the sole term (weight w) the training reward is
+    // (0.9 - w) r_imit + 0.1 r_res + w r_sole, the paper's reward unchanged.
+    let w = 0.2;
+    let mut env = ImitationEnv::new(
+        &motion,
+        &Config {
+            sole_reward_weight: w,
+            ..cfg
+        },
+    )
+    .unwrap();
+    let s = env.step(&action).unwrap();
+    assert!((s.info.paper_reward - r.info.paper_reward).abs() < 1e-6);
+    let r_sole = (s.reward - s.info.paper_reward) / w + s.r_imit;
+    assert!((-1e-4..=1.0 + 1e-4).contains(&r_sole), "r_sole {r_sole}");
 }
 
 #[test]

@@ -28,6 +28,21 @@ pub struct Clip {
     pub motion: Motion,
 }
 
+impl Clip {
+    /// Clips made in memory (the evaluation's training sets): each named
+    /// after itself, with no file behind it.
+    pub fn all_from(named: &[(String, Motion)]) -> Vec<Clip> {
+        named
+            .iter()
+            .map(|(name, motion)| Clip {
+                name: name.clone(),
+                source: name.clone(),
+                motion: motion.clone(),
+            })
+            .collect()
+    }
+}
+
 /// Something happened; for progress displays and logs.
 #[derive(Debug, Clone)]
 pub enum Event<'a> {

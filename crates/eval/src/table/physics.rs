@@ -173,14 +173,7 @@ pub fn correct_and_debias(
         Some(&debias),
         |name| seeds.get(name).copied().unwrap_or(0),
     );
-    let clips: Vec<pipeline::Clip> = originals
-        .iter()
-        .map(|(name, m)| pipeline::Clip {
-            name: name.clone(),
-            source: name.clone(),
-            motion: m.clone(),
-        })
-        .collect();
+    let clips = pipeline::Clip::all_from(&originals);
     let made: Vec<pipeline::WorkClip> = subset
         .iter()
         .map(|(name, m)| pipeline::WorkClip::given(name, m.clone()))
