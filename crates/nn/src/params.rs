@@ -108,6 +108,12 @@ impl Params {
         self.store()?.register(name, t)
     }
 
+    /// The parameter registered as `name`.
+    pub fn get(&self, name: &str) -> Option<Var> {
+        let s = self.store().ok()?;
+        s.index.get(name).map(|&i| s.vars[i].1.clone())
+    }
+
     /// Every parameter, in registration order.
     pub fn vars(&self) -> Vec<(String, Var)> {
         self.store().map(|s| s.vars.clone()).unwrap_or_default()
