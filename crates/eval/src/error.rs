@@ -9,7 +9,7 @@ pub enum EvalError {
     #[error(transparent)]
     Motion(#[from] motion::MotionError),
     #[error(transparent)]
-    Vae(#[from] vae::VaeError),
+    Nn(#[from] nn::NnError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
