@@ -5,6 +5,7 @@
 //! transposed once at construction, which is what the LSTM-based models feed it.
 
 use candle_core::Tensor;
+use candle_nn::VarBuilder;
 
 use crate::error::Result;
 use crate::params::Params;
@@ -24,6 +25,19 @@ impl Linear {
         let bound = 1.0 / (fan_in as f32).sqrt();
         let w = p.uniform(&format!("{name}.weight"), &[fan_out, fan_in], bound)?;
         let b = p.uniform(&format!("{name}.bias"), &[fan_out], bound)?;
+        Linear::from_weights(w, Some(b))
+    }
+
+    /// The candle-transformers form: `weight` and `bias` from `vb` (with a
+    /// [`Params::var_builder`], the same scheme and draws as [`Linear::new`]).
+    pub fn from_vb(vb: VarBuilder, fan_in: usize, fan_out: usize) -> Result<Self> {
+        let bound = 1.0 / (fan_in as f64).sqrt();
+        let init = candle_nn::Init::Uniform {
+            lo: -bound,
+            up: bound,
+        };
+        let w = vb.get_with_hints((fan_out, fan_in), "weight", init)?;
+        let b = vb.get_with_hints(fan_out, "bias", init)?;
         Linear::from_weights(w, Some(b))
     }
 

@@ -6,6 +6,7 @@
 //! variant whose output layer starts near zero.
 
 use candle_core::Tensor;
+use candle_nn::VarBuilder;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{NnError, Result};
@@ -70,6 +71,24 @@ impl Mlp {
     /// Layers `{name}.0`, `{name}.1`, ...
     pub fn new(cfg: &MlpConfig, p: &Params, name: &str) -> Result<Self> {
         Mlp::with_layer_names(cfg, p, |i| format!("{name}.{i}"))
+    }
+
+    /// The candle-transformers form: layer `i` from `vb.pp(i)` (with a
+    /// [`Params::var_builder`], the scheme; `cfg.init` must be `Uniform`).
+    pub fn from_vb(cfg: &MlpConfig, vb: VarBuilder) -> Result<Self> {
+        cfg.validate()?;
+        if cfg.init != MlpInit::Uniform {
+            return Err(NnError::Config(
+                "an MLP built from a VarBuilder is initialised by the builder".into(),
+            ));
+        }
+        let layers = cfg
+            .dims()
+            .windows(2)
+            .enumerate()
+            .map(|(i, d)| Linear::from_vb(vb.pp(i.to_string()), d[0], d[1]))
+            .collect::<Result<_>>()?;
+        Ok(Mlp { layers })
     }
 
     /// Layers named by `layer_name(i)` (for model files that predate the
@@ -161,5 +180,17 @@ mod tests {
         assert!(named.is_ok());
         assert_eq!(q.vars()[2].0, "layer1.weight");
         assert!(Mlp::new(&MlpConfig::new(5, &[0], 2), &q, "bad").is_err());
+        // Through a VarBuilder: the same names and draws as `new`.
+        let (a, b) = (Params::new(9), Params::new(9));
+        let cfg = MlpConfig::new(3, &[4], 2);
+        Mlp::new(&cfg, &a, "m").unwrap();
+        Mlp::from_vb(&cfg, b.var_builder().pp("m")).unwrap();
+        let flat = |p: &Params| -> Vec<(String, Vec<f32>)> {
+            p.vars()
+                .into_iter()
+                .map(|(n, v)| (n, v.flatten_all().unwrap().to_vec1().unwrap()))
+                .collect()
+        };
+        assert_eq!(flat(&a), flat(&b));
     }
 }
