@@ -117,6 +117,23 @@ impl Split {
         c
     }
 
+    /// What `class` matched and how the clips split with `actor` held out,
+    /// in one line.
+    pub fn describe(&self, class: &str, actor: &str) -> String {
+        format!(
+            "class `{class}` matched {} ({} clips: {}); test actor {actor}: {} clips, training: {} clips",
+            self.classes().join(", "),
+            self.train.len() + self.test.len(),
+            self.actors()
+                .iter()
+                .map(|(a, n)| format!("{a} {n}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            self.test.len(),
+            self.train.len()
+        )
+    }
+
     /// Clip count per actor, training and test together.
     pub fn actors(&self) -> BTreeMap<String, usize> {
         let mut m = BTreeMap::new();

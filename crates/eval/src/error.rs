@@ -10,6 +10,9 @@ pub enum EvalError {
     Motion(#[from] motion::MotionError),
     #[error(transparent)]
     Nn(#[from] nn::NnError),
+    /// The table's VAE set (training, caching, sampling).
+    #[error(transparent)]
+    Vae(#[from] vae::VaeError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
@@ -21,6 +24,13 @@ pub enum EvalError {
     Data(String),
     #[error("augmentation failed: {0}")]
     Augmentation(Box<dyn std::error::Error + Send + Sync>),
+    #[error("the augmentation pipeline failed: {0}")]
+    Pipeline(#[from] pipeline::PipelineError),
+    /// The table's physics set corrects the VAE's samples.
+    #[error("invalid configuration: the physics set corrects the VAE's samples: add the vae set")]
+    PhysicsNeedsVae,
+    #[error("physical correction failed: {0}")]
+    Correction(String),
 }
 
 pub type Result<T> = std::result::Result<T, EvalError>;

@@ -8,15 +8,31 @@
 //! * [`mmd`]: maximum mean discrepancy between synthesised and test clips.
 //! * [`predict`]: the downstream protocol: leave one actor out, train a motion
 //!   prediction model (GRU seq2seq or DCT + GCN) with and without augmented clips,
-//!   report the Euler-angle error at 100, 200 and 400 ms.
+//!   report the Euler-angle error at 100, 200 and 400 ms; [`options`]: how
+//!   its models are trained.
+//! * [`augment`]: where synthesised clips come from (a recipe run in memory by
+//!   the `pipeline` crate, or the motion VAE); [`scores`]: min DTW, MMD and
+//!   plausibility of a synthesised set.
+//! * [`table`]: the whole evaluation table (config, a run returning a typed
+//!   result, its JSON and Markdown), its physics rows through the pipeline's
+//!   one executor.
 //!
-//! No HTTP, no SQL, no files written: the CLI (`motionaug eval`) does I/O.
+//! No HTTP, no SQL; files only where asked: the table's `work` folder (trained
+//! VAEs, corrections, so a rerun resumes) and [`table::Table::write`]. The CLI
+//! (`motionaug eval`) parses arguments and prints.
 
+pub mod augment;
 pub mod dataset;
 pub mod dtw;
 pub mod error;
 pub mod euler;
 pub mod mmd;
+pub mod options;
 pub mod predict;
+pub mod scores;
+pub mod table;
 
 pub use error::{EvalError, Result};
+
+/// Where progress lines go (the CLI prints them on stderr).
+pub type Log<'a> = &'a (dyn Fn(&str) + Sync);

@@ -10,7 +10,7 @@
 //!
 //! Modules, in pipeline order: [`scale`] (bone scales, naive retarget),
 //! [`layout`] (points and rigid distances of a body), [`contact`] (planted feet,
-//! key joint pairs), [`solve`] (the optimiser), [`ik`] (rotations from
+//! key joint pairs), [`pairs`] (which clips are partners), [`solve`] (the optimiser), [`ik`] (rotations from
 //! positions), [`retarget`] (one variation and its report), [`dataset`] (many).
 
 pub mod contact;
@@ -18,6 +18,7 @@ pub mod dataset;
 pub mod error;
 pub mod ik;
 pub mod layout;
+pub mod pairs;
 pub mod retarget;
 pub mod scale;
 pub mod solve;
@@ -25,6 +26,7 @@ pub mod solve;
 pub use contact::{KeyPair, KeyPairOptions};
 pub use dataset::{Variation, VariationSpec, variations};
 pub use error::InteractionError;
+pub use pairs::pairs;
 pub use retarget::{Report, RetargetOptions, Retargeted, retarget};
 pub use scale::BoneScale;
 pub use solve::SolverOptions;

@@ -26,6 +26,7 @@
 //! held-out scales ([`crate::generate::generate`]) next to the optimiser's
 //! figures for the same variations (from the dataset, same 30 fps clips).
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use candle_core::Tensor;
@@ -452,8 +453,52 @@ fn evaluate_here(
     on_split: &mut (dyn FnMut(&EvalReport) + Send),
 ) -> Result<EvalReport> {
     let start = Instant::now();
+    progress("training the FID feature network");
+    let (features, quality) = train_features(dataset, config)?;
+    let tasks = tasks(dataset, config, only)?;
+    let run = Run {
+        dataset,
+        config,
+        sources,
+        features: &features,
+        quality: &quality,
+        tasks: &tasks,
+        start,
+        progress: Mutex::new(progress),
+        done: Mutex::new(vec![None; tasks.len()]),
+        comparison: Mutex::new(Vec::new()),
+        on_split: Mutex::new(on_split),
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(config.jobs.max(1))
+        .thread_name(|i| format!("interaction-eval-{i}"))
+        .build()
+        .map_err(|e| ModelError::Data(format!("cannot start the evaluation threads: {e}")))?;
+    use rayon::prelude::*;
+    pool.install(|| {
+        (0..tasks.len())
+            .into_par_iter()
+            .try_for_each(|i| run.fold(i))
+    })?;
+    let done = run
+        .done
+        .into_inner()
+        .map_err(|_| ModelError::Data("a fold panicked".into()))?;
+    let rows = run.comparison.into_inner().unwrap_or_default();
+    Ok(report(
+        dataset,
+        config,
+        &quality,
+        &assemble(&tasks, &done),
+        &rows,
+        start,
+    ))
+}
+
+/// The FID feature network, trained on one thread on every variation (80/20
+/// by variation for its own check).
+fn train_features(dataset: &Dataset, config: &EvalConfig) -> Result<(FeatureNet, FeatureQuality)> {
     let w = config.train.window;
-    // Feature network: every variation, 80/20 by variation for its own check.
     let (f_train, f_test) = {
         let keep = folds(dataset, "random", config.seed ^ 0xF1D);
         let (_, tr, te) = &keep[0];
@@ -465,20 +510,24 @@ fn evaluate_here(
     let mut fc = FeatureConfig::new(dataset.pairs.len());
     fc.steps = config.feature_steps;
     fc.seed = config.seed;
-    progress("training the FID feature network");
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .map_err(|e| ModelError::Data(format!("cannot start the evaluation thread: {e}")))?;
-    let (features, quality) =
-        one.install(|| FeatureNet::train(dataset, &f_train, &f_test, w, &fc))?;
-    // Every fold of every split as one task; tasks run `jobs` at a time.
-    struct Task {
-        split: &'static str,
-        name: String,
-        train: Vec<Sample>,
-        test: Vec<Sample>,
-    }
+    one.install(|| FeatureNet::train(dataset, &f_train, &f_test, w, &fc))
+}
+
+/// One fold of one split: what a task trains and tests on.
+struct Task {
+    split: &'static str,
+    name: String,
+    train: Vec<Sample>,
+    test: Vec<Sample>,
+}
+
+/// Every fold of every split (of `only`, when given) as one task.
+fn tasks(dataset: &Dataset, config: &EvalConfig, only: &[String]) -> Result<Vec<Task>> {
+    let w = config.train.window;
     let mut tasks = Vec::new();
     for split in SPLITS {
         if !only.is_empty() && !only.iter().any(|s| s == split) {
@@ -502,98 +551,113 @@ fn evaluate_here(
             });
         }
     }
-    let progress = std::sync::Mutex::new(progress);
-    let say = |msg: &str| {
-        if let Ok(mut p) = progress.lock() {
+    Ok(tasks)
+}
+
+/// The splits whose folds are all done, averaged.
+fn assemble(tasks: &[Task], done: &[Option<FoldResult>]) -> Vec<SplitResult> {
+    let mut splits = Vec::new();
+    for split in SPLITS {
+        let mine: Vec<usize> = (0..tasks.len())
+            .filter(|&i| tasks[i].split == split)
+            .collect();
+        if mine.is_empty() || mine.iter().any(|&i| done[i].is_none()) {
+            continue;
+        }
+        let results: Vec<FoldResult> = mine.iter().filter_map(|&i| done[i].clone()).collect();
+        splits.push(split_result(split, results));
+    }
+    splits
+}
+
+/// The evaluation while its folds run, `jobs` at a time: what every fold
+/// reads, and what they report into (folds done, the optimiser comparison,
+/// the caller's progress and per-split callbacks).
+struct Run<'a> {
+    dataset: &'a Dataset,
+    config: &'a EvalConfig,
+    sources: &'a [(String, Motion, Motion)],
+    features: &'a FeatureNet,
+    quality: &'a FeatureQuality,
+    tasks: &'a [Task],
+    start: Instant,
+    progress: Mutex<&'a mut (dyn FnMut(&str) + Send)>,
+    done: Mutex<Vec<Option<FoldResult>>>,
+    comparison: Mutex<Vec<CompareRow>>,
+    on_split: Mutex<&'a mut (dyn FnMut(&EvalReport) + Send)>,
+}
+
+impl Run<'_> {
+    fn say(&self, msg: &str) {
+        if let Ok(mut p) = self.progress.lock() {
             (*p)(msg);
         }
-    };
-    let done: std::sync::Mutex<Vec<Option<FoldResult>>> =
-        std::sync::Mutex::new(vec![None; tasks.len()]);
-    let comparison = std::sync::Mutex::new(Vec::new());
-    let on_split = std::sync::Mutex::new(on_split);
-    let assemble = |done: &[Option<FoldResult>]| -> Vec<SplitResult> {
-        let mut splits = Vec::new();
-        for split in SPLITS {
-            let mine: Vec<usize> = (0..tasks.len())
-                .filter(|&i| tasks[i].split == split)
-                .collect();
-            if mine.is_empty() || mine.iter().any(|&i| done[i].is_none()) {
-                continue;
+    }
+
+    /// Train and test fold `i`; on the random split also compare with the
+    /// optimiser on whole clips; then report the splits done so far.
+    fn fold(&self, i: usize) -> Result<()> {
+        let t = &self.tasks[i];
+        self.say(&format!(
+            "{} {}: training on {} windows, testing on {}",
+            t.split,
+            t.name,
+            t.train.len(),
+            t.test.len()
+        ));
+        let (r, model) = evaluate_fold(
+            self.dataset,
+            self.features,
+            &t.name,
+            &t.train,
+            &t.test,
+            self.config,
+        )?;
+        if t.split == "random" && !self.sources.is_empty() {
+            self.say("comparing with the optimiser on whole clips");
+            let held: std::collections::BTreeSet<(usize, usize)> =
+                t.test.iter().map(|s| (s.pair, s.variation)).collect();
+            let keep: Keep = Box::new(move |p, v| held.contains(&(p, v)));
+            let rows = compare(
+                self.dataset,
+                &model,
+                &keep,
+                self.sources,
+                self.config.compare_per_pair,
+            )?;
+            if let Ok(mut c) = self.comparison.lock() {
+                *c = rows;
             }
-            let results: Vec<FoldResult> = mine.iter().filter_map(|&i| done[i].clone()).collect();
-            splits.push(split_result(split, results));
         }
-        splits
-    };
-    let jobs = config.jobs.max(1);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs)
-        .thread_name(|i| format!("interaction-eval-{i}"))
-        .build()
-        .map_err(|e| ModelError::Data(format!("cannot start the evaluation threads: {e}")))?;
-    use rayon::prelude::*;
-    pool.install(|| {
-        (0..tasks.len())
-            .into_par_iter()
-            .try_for_each(|i| -> Result<()> {
-                let t = &tasks[i];
-                say(&format!(
-                    "{} {}: training on {} windows, testing on {}",
-                    t.split,
-                    t.name,
-                    t.train.len(),
-                    t.test.len()
-                ));
-                let (r, model) =
-                    evaluate_fold(dataset, &features, &t.name, &t.train, &t.test, config)?;
-                if t.split == "random" && !sources.is_empty() {
-                    say("comparing with the optimiser on whole clips");
-                    let held: std::collections::BTreeSet<(usize, usize)> =
-                        t.test.iter().map(|s| (s.pair, s.variation)).collect();
-                    let keep: Keep = Box::new(move |p, v| held.contains(&(p, v)));
-                    let rows = compare(dataset, &model, &keep, sources, config.compare_per_pair)?;
-                    if let Ok(mut c) = comparison.lock() {
-                        *c = rows;
-                    }
-                }
-                say(&format!(
-                    "{} {}: done in {:.0} s",
-                    t.split, t.name, r.train_s
-                ));
-                let snapshot = {
-                    let mut d = done
-                        .lock()
-                        .map_err(|_| ModelError::Data("a fold panicked".into()))?;
-                    d[i] = Some(r);
-                    d.clone()
-                };
-                let rows = comparison.lock().map(|c| c.clone()).unwrap_or_default();
-                if let Ok(mut cb) = on_split.lock() {
-                    (*cb)(&report(
-                        dataset,
-                        config,
-                        &quality,
-                        &assemble(&snapshot),
-                        &rows,
-                        start,
-                    ));
-                }
-                Ok(())
-            })
-    })?;
-    let done = done
-        .into_inner()
-        .map_err(|_| ModelError::Data("a fold panicked".into()))?;
-    let rows = comparison.into_inner().unwrap_or_default();
-    Ok(report(
-        dataset,
-        config,
-        &quality,
-        &assemble(&done),
-        &rows,
-        start,
-    ))
+        self.say(&format!(
+            "{} {}: done in {:.0} s",
+            t.split, t.name, r.train_s
+        ));
+        let snapshot = {
+            let mut d = self
+                .done
+                .lock()
+                .map_err(|_| ModelError::Data("a fold panicked".into()))?;
+            d[i] = Some(r);
+            d.clone()
+        };
+        let rows = self
+            .comparison
+            .lock()
+            .map(|c| c.clone())
+            .unwrap_or_default();
+        if let Ok(mut cb) = self.on_split.lock() {
+            (*cb)(&report(
+                self.dataset,
+                self.config,
+                self.quality,
+                &assemble(self.tasks, &snapshot),
+                &rows,
+                self.start,
+            ));
+        }
+        Ok(())
+    }
 }
 
 fn split_result(split: &str, results: Vec<FoldResult>) -> SplitResult {

@@ -38,6 +38,36 @@ pub struct WorkClip {
 }
 
 impl WorkClip {
+    /// A clip made outside the plan (the evaluation table's VAE samples, for
+    /// a plan of [`crate::plan::corrections`]), with a manifest entry that
+    /// names only it.
+    pub fn given(name: &str, motion: Motion) -> WorkClip {
+        WorkClip {
+            name: name.to_string(),
+            entry: ManifestEntry {
+                synth: synth::ManifestEntry {
+                    file: name.to_string(),
+                    source: name.to_string(),
+                    op: "given".into(),
+                    op_index: 0,
+                    copy: 0,
+                    seed: 0,
+                    params: serde_json::Value::Null,
+                    sampled: serde_json::Map::new(),
+                    frames: motion.frames(),
+                    fps: motion.fps(),
+                    effector: None,
+                    keyframe: None,
+                    target: None,
+                },
+                correction: None,
+                debiased: false,
+            },
+            motion,
+            mask: None,
+        }
+    }
+
     fn made(clip: NewClip) -> WorkClip {
         WorkClip {
             name: clip.name,
@@ -126,6 +156,10 @@ pub struct Context<'a> {
     pub tune_correction: Option<&'a (dyn Fn(&mut correct::CorrectConfig) + Sync)>,
     /// Each PPO iteration of a correction.
     pub on_progress: &'a (dyn Fn(&correct::job::ProgressEvent) + Sync),
+    /// Each finished correction (a reused one too), accepted or not: its
+    /// whole report and clip, beyond what the manifest keeps (the evaluation
+    /// table's R_norm with action 0 and its corrected clips before debiasing).
+    pub on_corrected: &'a (dyn Fn(&correct::Outcome) + Sync),
 }
 
 impl<'a> Context<'a> {
@@ -139,6 +173,7 @@ impl<'a> Context<'a> {
             stop: None,
             tune_correction: None,
             on_progress: &|_| {},
+            on_corrected: &|_| {},
         }
     }
 
@@ -321,10 +356,12 @@ fn correction(
     if let Some(tune) = ctx.tune_correction {
         tune(&mut config);
     }
-    stages::correct_with_config(config, name, motion, ctx.dir, warm_start, ctx.on_progress).map_err(
-        |e| match e {
-            PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
-            other => other,
-        },
-    )
+    let outcome =
+        stages::correct_with_config(config, name, motion, ctx.dir, warm_start, ctx.on_progress)
+            .map_err(|e| match e {
+                PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
+                other => other,
+            })?;
+    (ctx.on_corrected)(&outcome);
+    Ok(outcome)
 }

@@ -168,24 +168,8 @@ pub fn class_of(name: &str) -> String {
     parts[..end].join("_")
 }
 
-/// Two-person pairs among clip names: `<stem>_A` with `<stem>_B` (the CMU
-/// pairs' naming). Returns `(stem, a, b)` sorted by stem.
-pub fn pairs(names: &[String]) -> Vec<(String, String, String)> {
-    let mut out = Vec::new();
-    for a in names {
-        let Some(stem) = a.strip_suffix("_A").or_else(|| a.strip_suffix("_a")) else {
-            continue;
-        };
-        if let Some(b) = names
-            .iter()
-            .find(|b| b.as_str() == format!("{stem}_B") || b.as_str() == format!("{stem}_b"))
-        {
-            out.push((stem.to_string(), a.clone(), b.clone()));
-        }
-    }
-    out.sort();
-    out
-}
+/// Two-person pairs among clip names (one rule for the whole product).
+pub use interaction::pairs;
 
 /// Seed of a dataset-level job, from the recipe seed and the job's key.
 pub fn job_seed(seed: u64, key: &str) -> u64 {
@@ -206,17 +190,65 @@ pub fn interaction_outputs(stem: &str, copies: u32) -> Vec<String> {
         .collect()
 }
 
-/// The job graph for clips `names` (in the order given) under `recipe`.
+/// The job graph for clips `names` (in the order given) under `recipe`: the
+/// jobs that make new clips (synthesis, VAE, interaction), then their
+/// corrections and debiasing.
 pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
-    let mut jobs = Vec::new();
-    let mut new_clips = Vec::new();
+    let mut graph = Graph::default();
     // Manifest op indices: the `[[ops]]`, then `[vae]`, then `[interaction]`.
     let vae_op_index = recipe.synth.as_ref().map_or(0, |s| s.ops.len());
-
     if let Some(s) = &recipe.synth {
+        graph.synthesize(s, names, seed);
+    }
+    if let Some(v) = &recipe.vae {
+        graph.vae(v, names, seed, vae_op_index);
+    }
+    if let Some(i) = &recipe.interaction {
+        graph.interaction(i, names, seed, vae_op_index + 1);
+    }
+    if let Some(c) = &recipe.correct {
+        graph.correct(c, recipe.debias.as_ref(), names, seed);
+    }
+    Plan::finished(graph.jobs)
+}
+
+/// The plan under construction: its jobs so far, and the new clips they make
+/// (what the correction jobs are planned over).
+#[derive(Default)]
+struct Graph {
+    jobs: Vec<PlannedJob>,
+    new_clips: Vec<NewClip>,
+}
+
+impl Graph {
+    /// A job that makes `outputs` from `sources` (no dependencies).
+    fn push_maker(
+        &mut self,
+        key: String,
+        kind: JobKind,
+        outputs: Vec<String>,
+        sources: &[String],
+        correctable: bool,
+    ) {
+        self.new_clips.extend(outputs.iter().map(|name| NewClip {
+            name: name.clone(),
+            producer: key.clone(),
+            sources: sources.to_vec(),
+            correctable,
+        }));
+        self.jobs.push(PlannedJob {
+            key,
+            kind,
+            deps: vec![],
+            outputs,
+            finishes: false,
+        });
+    }
+
+    /// One `synthesize` job per clip: every `[[ops]]` output of it.
+    fn synthesize(&mut self, s: &synth::Recipe, names: &[String], seed: u64) {
         for clip in names {
             let outputs = s.jobs(clip, seed);
-            let key = format!("synthesize:{clip}");
             let made: Vec<String> = outputs
                 .iter()
                 .map(|job| {
@@ -224,27 +256,23 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
                     format!("{clip}__{:02}_{op}_{:03}", job.op_index, job.copy)
                 })
                 .collect();
-            new_clips.extend(made.iter().map(|name| NewClip {
-                name: name.clone(),
-                producer: key.clone(),
-                sources: vec![clip.clone()],
-                correctable: true,
-            }));
-            jobs.push(PlannedJob {
-                key,
-                kind: JobKind::Synthesize {
-                    clip: clip.clone(),
-                    ops: s.clone(),
-                    outputs,
-                },
-                deps: vec![],
-                outputs: made,
-                finishes: false,
-            });
+            let kind = JobKind::Synthesize {
+                clip: clip.clone(),
+                ops: s.clone(),
+                outputs,
+            };
+            self.push_maker(
+                format!("synthesize:{clip}"),
+                kind,
+                made,
+                std::slice::from_ref(clip),
+                true,
+            );
         }
     }
 
-    if let Some(v) = &recipe.vae {
+    /// One `vae` job per group of at least `min_clips` clips.
+    fn vae(&mut self, v: &VaeStep, names: &[String], seed: u64, op_index: usize) {
         let mut groups: BTreeMap<String, Vec<String>> = BTreeMap::new();
         for name in names {
             let group = match v.group_by {
@@ -259,127 +287,124 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
             }
             let key = format!("vae:{group}");
             let outputs = vae_outputs(&group, v.copies);
-            new_clips.extend(outputs.iter().map(|name| NewClip {
-                name: name.clone(),
-                producer: key.clone(),
-                // Warm start from the best-corrected clip of the class: same
-                // skeleton and action, and the policy that balances best.
-                sources: clips.clone(),
-                correctable: true,
-            }));
-            jobs.push(PlannedJob {
-                key: key.clone(),
-                kind: JobKind::Vae {
-                    group: group.clone(),
-                    clips,
-                    seed: job_seed(seed, &key),
-                    step: v.clone(),
-                    op_index: vae_op_index,
-                },
-                deps: vec![],
-                outputs,
-                finishes: false,
-            });
+            // Warm start from the best-corrected clip of the class: same
+            // skeleton and action, and the policy that balances best.
+            let sources = clips.clone();
+            let kind = JobKind::Vae {
+                group,
+                clips,
+                seed: job_seed(seed, &key),
+                step: v.clone(),
+                op_index,
+            };
+            self.push_maker(key, kind, outputs, &sources, true);
         }
     }
 
-    if let Some(i) = &recipe.interaction {
+    /// One `interaction` job per pair; its outputs are not corrected (two
+    /// partners are not simulated together).
+    fn interaction(&mut self, i: &InteractionStep, names: &[String], seed: u64, op_index: usize) {
         for (stem, a, b) in pairs(names) {
             let key = format!("interaction:{stem}");
             let outputs = interaction_outputs(&stem, i.copies);
-            new_clips.extend(outputs.iter().map(|name| NewClip {
-                name: name.clone(),
-                producer: key.clone(),
-                sources: vec![],
-                correctable: false,
-            }));
-            jobs.push(PlannedJob {
-                key: key.clone(),
-                kind: JobKind::Interaction {
-                    pair: stem,
-                    a,
-                    b,
-                    seed: job_seed(seed, &key),
-                    step: i.clone(),
-                    op_index: vae_op_index + 1,
-                },
-                deps: vec![],
-                outputs,
-                finishes: false,
-            });
+            let kind = JobKind::Interaction {
+                pair: stem,
+                a,
+                b,
+                seed: job_seed(seed, &key),
+                step: i.clone(),
+                op_index,
+            };
+            self.push_maker(key, kind, outputs, &[], false);
         }
     }
 
-    let Some(c) = &recipe.correct else {
-        return Plan::finished(jobs);
-    };
-    let originals_needed = c.warm_start || recipe.debias.is_some();
-    if originals_needed {
-        for clip in names {
-            let key = format!("correct_original:{clip}");
-            jobs.push(PlannedJob {
-                key: key.clone(),
-                kind: JobKind::CorrectOriginal {
-                    clip: clip.clone(),
+    /// The corrected originals (when warm start or debiasing needs them), a
+    /// `correct` job per correctable new clip, and the debiasing jobs.
+    fn correct(
+        &mut self,
+        c: &CorrectStep,
+        debias: Option<&debias::TrainConfig>,
+        names: &[String],
+        seed: u64,
+    ) {
+        if c.warm_start || debias.is_some() {
+            for clip in names {
+                let key = format!("correct_original:{clip}");
+                self.jobs.push(PlannedJob {
+                    kind: JobKind::CorrectOriginal {
+                        clip: clip.clone(),
+                        seed: job_seed(seed, &key),
+                        step: c.clone(),
+                    },
+                    key,
+                    deps: vec![],
+                    outputs: vec![],
+                    finishes: false,
+                });
+            }
+        }
+        let mut corrected = Vec::new();
+        for clip in self.new_clips.iter().filter(|n| n.correctable) {
+            let key = format!("correct:{}", clip.name);
+            let sources = if c.warm_start {
+                clip.sources.clone()
+            } else {
+                vec![]
+            };
+            let mut deps = vec![clip.producer.clone()];
+            deps.extend(sources.iter().map(|s| format!("correct_original:{s}")));
+            self.jobs.push(PlannedJob {
+                kind: JobKind::Correct {
+                    clip: clip.name.clone(),
+                    sources,
                     seed: job_seed(seed, &key),
                     step: c.clone(),
                 },
-                deps: vec![],
-                outputs: vec![],
+                key: key.clone(),
+                deps,
+                outputs: vec![clip.name.clone()],
                 finishes: false,
             });
+            corrected.push((clip.name.clone(), key));
+        }
+        if let Some(config) = debias.filter(|_| !names.is_empty()) {
+            self.jobs.extend(debias_jobs(names, config, corrected));
         }
     }
-    let mut corrected = Vec::new();
-    for clip in new_clips.iter().filter(|n| n.correctable) {
-        let key = format!("correct:{}", clip.name);
-        let mut deps = vec![clip.producer.clone()];
-        let sources = if c.warm_start {
-            clip.sources.clone()
-        } else {
-            vec![]
-        };
-        deps.extend(sources.iter().map(|s| format!("correct_original:{s}")));
+}
+
+/// `debias_train` on the corrected `originals`, then a `debias_apply` per
+/// `(clip, key of its correct job)`.
+fn debias_jobs(
+    originals: &[String],
+    config: &debias::TrainConfig,
+    corrected: Vec<(String, String)>,
+) -> Vec<PlannedJob> {
+    let train_key = "debias_train".to_string();
+    let mut jobs = vec![PlannedJob {
+        key: train_key.clone(),
+        kind: JobKind::DebiasTrain {
+            originals: originals.to_vec(),
+            config: config.clone(),
+        },
+        deps: originals
+            .iter()
+            .map(|n| format!("correct_original:{n}"))
+            .collect(),
+        outputs: vec![],
+        finishes: false,
+    }];
+    for (name, correct_key) in corrected {
         jobs.push(PlannedJob {
-            key: key.clone(),
-            kind: JobKind::Correct {
-                clip: clip.name.clone(),
-                sources,
-                seed: job_seed(seed, &key),
-                step: c.clone(),
-            },
-            deps,
-            outputs: vec![clip.name.clone()],
+            key: format!("debias_apply:{name}"),
+            kind: JobKind::DebiasApply { clip: name.clone() },
+            deps: vec![correct_key, train_key.clone()],
+            outputs: vec![name],
             finishes: false,
         });
-        corrected.push((clip.name.clone(), key));
     }
-    if let Some(config) = recipe.debias.as_ref().filter(|_| !names.is_empty()) {
-        let train_key = "debias_train".to_string();
-        jobs.push(PlannedJob {
-            key: train_key.clone(),
-            kind: JobKind::DebiasTrain {
-                originals: names.to_vec(),
-                config: config.clone(),
-            },
-            deps: names
-                .iter()
-                .map(|n| format!("correct_original:{n}"))
-                .collect(),
-            outputs: vec![],
-            finishes: false,
-        });
-        for (name, correct_key) in corrected {
-            jobs.push(PlannedJob {
-                key: format!("debias_apply:{name}"),
-                kind: JobKind::DebiasApply { clip: name.clone() },
-                deps: vec![correct_key, train_key.clone()],
-                outputs: vec![name],
-                finishes: false,
-            });
-        }
-    }
-    Plan::finished(jobs)
+    jobs
 }
 
 impl Plan {
@@ -442,25 +467,11 @@ pub fn corrections(
         });
     }
     if let Some(config) = debias {
-        jobs.push(PlannedJob {
-            key: "debias_train".into(),
-            kind: JobKind::DebiasTrain {
-                originals: originals.to_vec(),
-                config: config.clone(),
-            },
-            deps: original_keys,
-            outputs: vec![],
-            finishes: false,
-        });
-        for clip in clips {
-            jobs.push(PlannedJob {
-                key: format!("debias_apply:{clip}"),
-                kind: JobKind::DebiasApply { clip: clip.clone() },
-                deps: vec![format!("correct:{clip}"), "debias_train".into()],
-                outputs: vec![clip.clone()],
-                finishes: false,
-            });
-        }
+        let corrected = clips
+            .iter()
+            .map(|clip| (clip.clone(), format!("correct:{clip}")))
+            .collect();
+        jobs.extend(debias_jobs(originals, config, corrected));
     }
     Plan::finished(jobs)
 }

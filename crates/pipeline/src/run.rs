@@ -47,6 +47,13 @@ pub enum Event<'a> {
         job: &'a PlannedJob,
         progress: &'a correct::job::ProgressEvent,
     },
+    /// A correction finished (or was found finished), accepted or not.
+    Corrected {
+        job: &'a PlannedJob,
+        report: &'a correct::Report,
+        /// The clip as the simulation tracked it.
+        motion: &'a Motion,
+    },
 }
 
 /// Where and how to run.
@@ -88,7 +95,7 @@ pub struct Summary {
 /// [`Inputs`] of every job.
 struct State<'a> {
     options: &'a Options<'a>,
-    tune: Option<&'a Tune>,
+    tune: Tune<'a>,
     sources: HashMap<String, &'a Clip>,
     /// Clips between jobs.
     pending: HashMap<String, WorkClip>,
@@ -105,11 +112,32 @@ struct State<'a> {
 pub fn run(recipe: &Recipe, clips: &[Clip], options: &Options) -> Result<Summary, PipelineError> {
     let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
     let plan = plan(recipe, &names, options.seed);
-    run_plan(&plan, clips, Vec::new(), options, None)
+    run_plan(&plan, clips, Vec::new(), options, Tune::default())
 }
 
-/// Changes to every correction's settings (see [`exec::Context::tune_correction`]).
-pub type Tune = dyn Fn(&mut correct::CorrectConfig) + Sync;
+/// What the evaluation table changes about a run; `motionaug augment`
+/// changes nothing ([`Tune::default`]).
+#[derive(Clone, Copy, Default)]
+pub struct Tune<'a> {
+    /// Changes to every correction's settings beyond the plan's (see
+    /// [`exec::Context::tune_correction`]).
+    pub correction: Option<&'a (dyn Fn(&mut correct::CorrectConfig) + Sync)>,
+    /// The folder under `work` of the corrections of made clips, instead of
+    /// `correct` (the table keeps them in `samples`, where its earlier runs
+    /// left them to be resumed).
+    pub corrections_folder: Option<&'a str>,
+}
+
+impl Tune<'_> {
+    /// The folder of `job`'s own files under `work` ([`exec::job_dir`] with
+    /// this run's corrections folder); `None` for kinds that keep nothing.
+    pub fn job_dir(&self, work: &Path, job: &PlannedJob) -> Option<PathBuf> {
+        match (&job.kind, self.corrections_folder) {
+            (JobKind::Correct { clip, .. }, Some(folder)) => Some(work.join(folder).join(clip)),
+            _ => exec::job_dir(work, job),
+        }
+    }
+}
 
 /// Run `plan` on source clips `clips`, with `made` the clips its first jobs
 /// work on that no job of it makes (e.g. samples of a VAE trained elsewhere,
@@ -119,7 +147,7 @@ pub fn run_plan(
     clips: &[Clip],
     made: Vec<WorkClip>,
     options: &Options,
-    tune: Option<&Tune>,
+    tune: Tune<'_>,
 ) -> Result<Summary, PipelineError> {
     let mut names = HashSet::new();
     for c in clips {
@@ -241,7 +269,10 @@ impl<'a> State<'a> {
     /// Runs one job with the executor; what it made, and how it ended.
     fn execute(&self, job: &PlannedJob) -> (Vec<Made>, Result<(), PipelineError>) {
         let work = self.options.work;
-        let dir = exec::job_dir(work, job).unwrap_or_else(|| work.to_path_buf());
+        let dir = self
+            .tune
+            .job_dir(work, job)
+            .unwrap_or_else(|| work.to_path_buf());
         // The manifest names a correction's report relative to the output folder.
         let report_path = self.options.out.and_then(|out| {
             dir.join("report.json")
@@ -252,10 +283,18 @@ impl<'a> State<'a> {
         let on_event = self.options.on_event;
         let on_progress =
             |p: &correct::job::ProgressEvent| on_event(Event::Correction { job, progress: p });
+        let on_corrected = |o: &correct::Outcome| {
+            on_event(Event::Corrected {
+                job,
+                report: &o.report,
+                motion: &o.motion,
+            })
+        };
         let ctx = Context {
             report_path,
             on_progress: &on_progress,
-            tune_correction: self.tune,
+            on_corrected: &on_corrected,
+            tune_correction: self.tune.correction,
             ..Context::in_dir(&dir)
         };
         let mut made = Vec::new();

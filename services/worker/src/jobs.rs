@@ -121,6 +121,7 @@ async fn run_in(
                 stop: Some(stop),
                 tune_correction: None,
                 on_progress: &on_progress,
+                on_corrected: &|_| {},
             };
             pipeline::execute(&job, &inputs, &mut uploader, &context)?;
             Ok(uploader.output)

@@ -71,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
         Event::JobFinished { .. } => bar.inc(1),
+        Event::Corrected { .. } => {}
         Event::Correction { job, progress: p } => {
             let r = p
                 .r_norm

@@ -20,7 +20,7 @@ pub struct Args {
     #[arg(long)]
     out: PathBuf,
     /// Training wall-time budget in seconds (over all resumes).
-    #[arg(long, default_value_t = 600.0)]
+    #[arg(long, default_value_t = CorrectConfig::default().time_budget_s)]
     time_budget: f64,
     /// Continue from the latest checkpoint in DIR/checkpoints.
     #[arg(long)]
@@ -28,19 +28,20 @@ pub struct Args {
     /// Root force helping the character: pd (MotionAug), none, or learned (RFC).
     #[arg(long, default_value = "pd")]
     residual: Residual,
-    /// Stop early once the deterministic rollout reaches this R_norm (and is accepted).
-    #[arg(long, default_value_t = 0.8)]
-    target_r_norm: f64,
+    /// Stop early once the deterministic rollout reaches this R_norm (and is
+    /// accepted) [default: the library's, 0.8].
+    #[arg(long)]
+    target_r_norm: Option<f64>,
     /// Parallel simulated environments.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
     /// Rollout threads.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = CorrectConfig::default().ppo.threads)]
     threads: usize,
     /// Stop after this many PPO iterations (for quick runs).
     #[arg(long)]
     max_iterations: Option<u64>,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = CorrectConfig::default().seed)]
     seed: u64,
     /// Start from another correction's checkpoints (its `DIR/checkpoints`), e.g.
     /// the source clip's for a synthesised variant of it.
@@ -58,13 +59,14 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let motion = args.clip.load(&args.input)?;
+    let defaults = CorrectConfig::default();
     let mut config = CorrectConfig {
         time_budget_s: args.time_budget,
-        target_r_norm: Some(args.target_r_norm),
+        target_r_norm: args.target_r_norm.or(defaults.target_r_norm),
         envs: args.envs,
         max_iterations: args.max_iterations,
         seed: args.seed,
-        ..CorrectConfig::default()
+        ..defaults
     };
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();

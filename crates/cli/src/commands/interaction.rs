@@ -62,13 +62,13 @@ struct DatasetArgs {
     #[arg(long)]
     out: PathBuf,
     /// Variations per grid scale (0.75, 0.80, ..., 1.25); the first is uniform.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = interaction_model::DatasetConfig::default().repeats)]
     repeats: usize,
     /// Per-bone jitter of the other repeats.
-    #[arg(long, default_value_t = 0.04)]
+    #[arg(long, default_value_t = interaction_model::DatasetConfig::default().bone_jitter)]
     bone_jitter: f64,
     /// Frame rate of the data (the networks' rate).
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = interaction_model::DatasetConfig::default().fps)]
     fps: f64,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -84,17 +84,17 @@ struct TrainArgs {
     /// Model directory to write (weights.safetensors + model.json).
     #[arg(long)]
     out: PathBuf,
-    #[arg(long, default_value_t = 1500)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().steps)]
     steps: usize,
     /// Window length in frames.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().window)]
     window: usize,
     /// Training window stride in frames.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().stride)]
     stride: usize,
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().batch)]
     batch: usize,
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().hidden)]
     hidden: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -138,19 +138,19 @@ struct EvalArgs {
     /// Training steps per fold.
     #[arg(long, default_value_t = 300)]
     steps: usize,
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().window)]
     window: usize,
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().stride)]
     stride: usize,
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().batch)]
     batch: usize,
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = interaction_model::TrainConfig::default().hidden)]
     hidden: usize,
     /// Training steps of the FID feature network.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = interaction_model::eval::EvalConfig::default().feature_steps)]
     feature_steps: usize,
     /// Folds trained at once (each on one thread).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = interaction_model::eval::EvalConfig::default().jobs)]
     jobs: usize,
     /// Only these splits (random, cross_scale, cross_interaction, cross_scale_interaction).
     #[arg(long = "split")]
@@ -173,7 +173,7 @@ struct PairArgs {
     #[arg(long = "key-pair", value_name = "A_JOINT:B_JOINT")]
     key_pairs: Vec<String>,
     /// Distance under which two joints are in contact, for key pair detection, metres.
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = interaction::KeyPairOptions::default().threshold_m)]
     pair_threshold: f64,
     /// Do not hold planted feet in place.
     #[arg(long)]
@@ -369,24 +369,34 @@ fn variations(args: VariationArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The pairs `<name>_A.bvh` + `<name>_B.bvh` of a directory, by name.
+/// The pairs `<name>_A.bvh` + `<name>_B.bvh` of a directory, by name: the
+/// BVH files' stems paired by `interaction::pairs`, the rule the pipeline and
+/// the service use.
 fn find_pairs(dir: &Path) -> anyhow::Result<Vec<(String, PathBuf, PathBuf)>> {
-    let mut out = Vec::new();
+    let mut stems = Vec::new();
     let entries =
         std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
     for e in entries {
         let path = e?.path();
-        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
-            continue;
-        };
-        if let Some(stem) = name.strip_suffix("_A.bvh") {
-            let b = dir.join(format!("{stem}_B.bvh"));
-            if b.is_file() {
-                out.push((stem.to_string(), path.clone(), b));
-            }
+        let is_bvh = path
+            .extension()
+            .is_some_and(|x| x.eq_ignore_ascii_case("bvh"));
+        if let (true, Some(stem)) = (is_bvh, path.file_stem().and_then(|n| n.to_str())) {
+            stems.push((stem.to_string(), path.clone()));
         }
     }
-    out.sort();
+    let names: Vec<String> = stems.iter().map(|(n, _)| n.clone()).collect();
+    let path_of = |name: &str| {
+        stems
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.clone())
+            .unwrap_or_default()
+    };
+    let out: Vec<_> = interaction::pairs(&names)
+        .into_iter()
+        .map(|(stem, a, b)| (stem, path_of(&a), path_of(&b)))
+        .collect();
     if out.is_empty() {
         bail!("{}: no pairs <name>_A.bvh + <name>_B.bvh", dir.display());
     }

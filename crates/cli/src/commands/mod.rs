@@ -6,7 +6,6 @@ pub mod convert;
 pub mod correct;
 pub mod debias;
 pub mod eval;
-pub mod eval_physics;
 pub mod inspect;
 pub mod interaction;
 pub mod metrics;

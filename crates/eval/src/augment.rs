@@ -1,0 +1,231 @@
+//! Where an evaluation's synthesised clips come from: a recipe run in memory
+//! by the `pipeline` crate (the same job graph `motionaug augment` runs), or
+//! the motion VAE directly (trained on the fold's training clips, sampled).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use motion::Motion;
+use serde::{Deserialize, Serialize};
+use vae::{Prior, TrainConfig as VaeTrainConfig, TrainedVae};
+
+use crate::Log;
+use crate::error::{EvalError, Result};
+
+/// The VAE as an augmentation: one model on the training clips, `per_clip`
+/// samples per training clip from `prior`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VaeChoice {
+    pub prior: Prior,
+    pub per_clip: usize,
+    pub iterations: u64,
+    /// Weight of the adversarial terms; `Some(0.0)`: no discriminators;
+    /// `None`: the vae crate's default.
+    pub adversarial_weight: Option<f64>,
+    pub seed: u64,
+}
+
+impl Default for VaeChoice {
+    /// MotionAug's: near samples, 10 per training clip; 300 iterations.
+    fn default() -> Self {
+        VaeChoice {
+            prior: Prior::Near,
+            per_clip: 10,
+            iterations: 300,
+            adversarial_weight: None,
+            seed: 0,
+        }
+    }
+}
+
+/// An augmentation: from training clips to synthesised clips.
+#[derive(Debug, Clone)]
+pub enum Augmentation {
+    /// A recipe run in memory; `work` keeps the intermediate results
+    /// (corrections, models), else a temporary folder removed at the end.
+    Recipe {
+        recipe: Box<pipeline::Recipe>,
+        seed: u64,
+        /// What to call it (the recipe file).
+        label: String,
+        work: Option<PathBuf>,
+    },
+    Vae(VaeChoice),
+}
+
+impl Augmentation {
+    pub fn label(&self) -> String {
+        match self {
+            Augmentation::Recipe { label, .. } => format!("recipe {label}"),
+            Augmentation::Vae(v) => format!("vae ({:?} prior)", v.prior),
+        }
+    }
+
+    /// The synthesised clips of `train`.
+    pub fn apply(&self, train: &[(String, Motion)], log: Log) -> Result<Vec<(String, Motion)>> {
+        match self {
+            Augmentation::Recipe {
+                recipe, seed, work, ..
+            } => apply_recipe(recipe, *seed, work.as_deref(), train, log),
+            Augmentation::Vae(v) => {
+                let model = train_vae(train, v.iterations, v.adversarial_weight, v.seed, log)?;
+                sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed)
+            }
+        }
+    }
+}
+
+/// Runs `recipe` on the training clips in memory with the pipeline crate;
+/// returns the kept outputs (an error when there are none).
+pub fn apply_recipe(
+    recipe: &pipeline::Recipe,
+    seed: u64,
+    work: Option<&Path>,
+    train: &[(String, Motion)],
+    log: Log,
+) -> Result<Vec<(String, Motion)>> {
+    let start = Instant::now();
+    let clips: Vec<pipeline::Clip> = train
+        .iter()
+        .map(|(name, m)| pipeline::Clip {
+            name: name.clone(),
+            source: name.clone(),
+            motion: m.clone(),
+        })
+        .collect();
+    let temp = std::env::temp_dir().join(format!("motionaug-eval-{}", std::process::id()));
+    let work_dir = work.unwrap_or(&temp);
+    let on_event = |event: pipeline::Event<'_>| {
+        if let pipeline::Event::JobFinished { job, ok } = event
+            && !matches!(job.kind, pipeline::JobKind::Synthesize { .. })
+        {
+            log(&format!(
+                "pipeline: {} {}",
+                job.key,
+                if ok { "done" } else { "failed" }
+            ));
+        }
+    };
+    let result = pipeline::run(
+        recipe,
+        &clips,
+        &pipeline::Options {
+            out: None,
+            work: work_dir,
+            seed,
+            on_event: &on_event,
+        },
+    );
+    if work.is_none() {
+        let _ = std::fs::remove_dir_all(&temp);
+    }
+    let summary = result.map_err(EvalError::Pipeline)?;
+    for (job, reason) in &summary.failures {
+        log(&format!("pipeline: {job} failed: {reason}"));
+    }
+    if !summary.rejected.is_empty() {
+        log(&format!(
+            "pipeline: {} outputs rejected by the correction",
+            summary.rejected.len()
+        ));
+    }
+    let out: Vec<(String, Motion)> = summary
+        .outputs
+        .into_iter()
+        .map(|o| (o.name, o.motion))
+        .collect();
+    if out.is_empty() {
+        return Err(EvalError::Augmentation(
+            format!(
+                "the recipe produced no clips ({} jobs failed)",
+                summary.failures.len()
+            )
+            .into(),
+        ));
+    }
+    log(&format!(
+        "recipe: {} clips from {} in {:.1} s",
+        out.len(),
+        train.len(),
+        start.elapsed().as_secs_f64()
+    ));
+    Ok(out)
+}
+
+/// Trains the motion VAE on the training clips (deterministic for a seed).
+pub fn train_vae(
+    train: &[(String, Motion)],
+    iterations: u64,
+    adversarial_weight: Option<f64>,
+    seed: u64,
+    log: Log,
+) -> Result<TrainedVae> {
+    let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
+    let mut config = VaeTrainConfig {
+        iterations: iterations.max(1),
+        seed,
+        ..VaeTrainConfig::default()
+    };
+    if let Some(w) = adversarial_weight {
+        if w == 0.0 {
+            config.adversarial = false;
+        } else {
+            config.weights.adversarial = w;
+        }
+    }
+    log(&format!(
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {})",
+        clips.len(),
+        config.iterations,
+        config.adversarial,
+        config.weights.adversarial
+    ));
+    let every = (config.iterations / 5).max(1);
+    let model = vae::train(&clips, &config, |p| {
+        if p.iteration % every == 0 {
+            log(&format!(
+                "vae: iteration {}/{} loss {:.4}",
+                p.iteration, p.iterations, p.losses.total
+            ));
+        }
+    })?;
+    log(&format!(
+        "vae: trained in {:.1} s",
+        model.meta().training.seconds
+    ));
+    Ok(model)
+}
+
+/// The VAE of one class and fold (seed 0): loaded from `dir` when an earlier
+/// run saved it there (training is deterministic, so this is the same model),
+/// else trained and saved, so a rerun does not train it again.
+pub fn cached_vae(
+    dir: &Path,
+    train: &[(String, Motion)],
+    iterations: u64,
+    adversarial_weight: Option<f64>,
+    log: Log,
+) -> Result<TrainedVae> {
+    if dir.join(vae::trained::META_FILE).is_file() {
+        log(&format!("vae: reusing {}", dir.display()));
+        return Ok(TrainedVae::load(dir)?);
+    }
+    let model = train_vae(train, iterations, adversarial_weight, 0, log)?;
+    model.save(dir)?;
+    Ok(model)
+}
+
+/// `count` samples of `model` from `prior`, named `vae_<Prior>_<nnnn>`.
+pub fn sample_vae(
+    model: &TrainedVae,
+    count: usize,
+    prior: Prior,
+    seed: u64,
+) -> Result<Vec<(String, Motion)>> {
+    let samples = model.sample(count, prior, seed)?;
+    Ok(samples
+        .into_iter()
+        .enumerate()
+        .map(|(i, s)| (format!("vae_{prior:?}_{i:04}"), s.motion))
+        .collect())
+}

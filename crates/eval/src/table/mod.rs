@@ -1,0 +1,460 @@
+//! The evaluation table: for several classes and held-out actors, the
+//! synthesis metrics of each synthesised set and the prediction error with
+//! each as augmentation, as one typed result ([`Table`]) with its renderer
+//! ([`Table::to_markdown`], [`Table::write`]).
+//!
+//! * [`TableConfig`]: what to compute; [`Default`] is `motionaug eval table`'s defaults.
+//! * [`run_table`]: computes it, cell by cell (one class of one test actor),
+//!   reporting progress and each finished cell ([`Progress`]).
+//! * [`physics`]: the physically corrected and debiased rows, through the
+//!   pipeline's one executor.
+//! * `render`: table.json and table.md.
+//!
+//! Trained VAEs and corrections are kept in `work/<actor>_<class>/`, so a
+//! rerun reuses them and resumes interrupted corrections.
+
+pub mod physics;
+mod render;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use motion::Motion;
+use serde::{Deserialize, Serialize};
+use vae::Prior;
+
+use crate::augment::{apply_recipe, cached_vae, sample_vae};
+use crate::dataset::{self, Split};
+use crate::error::{EvalError, Result};
+use crate::options::TrainOptions;
+use crate::predict::protocol::{self, ConditionResult, Horizons, ModelKind, TestSet};
+use crate::scores::{SynthScores, synth_scores};
+pub use physics::{PhysicsConfig, PhysicsSummary};
+
+/// A synthesised set of the table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SetKind {
+    /// Gaussian rotation noise, 10 copies per clip.
+    Noise,
+    /// IK edits with the class's preset, 10 copies per clip.
+    Ik,
+    /// VAE near and prior samples (10 per training clip).
+    Vae,
+    /// A subset of the VAE's near samples as sampled, physically corrected
+    /// and debiased (needs [`SetKind::Vae`]).
+    Physics,
+}
+
+impl SetKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            SetKind::Noise => "noise",
+            SetKind::Ik => "ik",
+            SetKind::Vae => "vae",
+            SetKind::Physics => "physics",
+        }
+    }
+}
+
+impl std::str::FromStr for SetKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        [SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::Physics]
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown set `{s}` (noise, ik, vae or physics)"))
+    }
+}
+
+impl std::fmt::Display for SetKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Conditions of the prediction tables, in order (sets not made are skipped).
+pub const PREDICT_CONDITIONS: [&str; 6] = [
+    "noise",
+    "ik",
+    "vae_near",
+    "vae_sub",
+    "vae_corrected",
+    "vae_debiased",
+];
+
+/// What the table computes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TableConfig {
+    /// Folder of HDM05 clips.
+    pub data: PathBuf,
+    /// Folder of the `HDM_<actor>.asf` skeletons (`None`: `data`).
+    pub skeleton_dir: Option<PathBuf>,
+    /// Where trained VAEs and corrections are kept (`<actor>_<class>/` each).
+    pub work: PathBuf,
+    /// Classes (parts of class names; also the IK preset names).
+    pub classes: Vec<String>,
+    pub test_actors: Vec<String>,
+    pub models: Vec<ModelKind>,
+    pub train: TrainOptions,
+    /// Noise set: Gaussian rotation noise, degrees.
+    pub noise_sigma_deg: f64,
+    /// VAE training iterations per class and fold.
+    pub vae_iterations: u64,
+    /// Also train the VAE without discriminators (synthesis metrics only).
+    pub vae_ablation: bool,
+    /// Train and score the prediction models (else synthesis metrics only).
+    pub predict: bool,
+    pub sets: Vec<SetKind>,
+    pub physics: PhysicsConfig,
+}
+
+impl Default for TableConfig {
+    fn default() -> Self {
+        TableConfig {
+            data: PathBuf::new(),
+            skeleton_dir: None,
+            work: PathBuf::new(),
+            classes: ["kick", "jog", "sneak", "grab", "deposit"]
+                .map(String::from)
+                .to_vec(),
+            test_actors: vec!["bd".into()],
+            models: vec![ModelKind::Seq2seq, ModelKind::Gcn],
+            train: TrainOptions::default(),
+            noise_sigma_deg: 2.0,
+            vae_iterations: 300,
+            vae_ablation: false,
+            predict: true,
+            sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae],
+            physics: PhysicsConfig::default(),
+        }
+    }
+}
+
+impl TableConfig {
+    /// Checks what a run would otherwise find out late.
+    pub fn validate(&self) -> Result<()> {
+        if self.sets.contains(&SetKind::Physics) && !self.sets.contains(&SetKind::Vae) {
+            return Err(EvalError::PhysicsNeedsVae);
+        }
+        let config = |m: &str| Err(EvalError::Config(m.into()));
+        if self.data.as_os_str().is_empty() {
+            return config("no data folder");
+        }
+        if self.work.as_os_str().is_empty() {
+            return config("no work folder");
+        }
+        if self.classes.is_empty() || self.test_actors.is_empty() {
+            return config("no classes or no test actors");
+        }
+        if self.predict && self.models.is_empty() {
+            return config("no prediction models");
+        }
+        if let Some(e) = self.train.epochs
+            && !(e.is_finite() && e > 0.0)
+        {
+            return config("epochs must be positive");
+        }
+        self.physics.validate()
+    }
+
+    fn has(&self, set: SetKind) -> bool {
+        self.sets.contains(&set)
+    }
+}
+
+/// One class of one test actor.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct TableCell {
+    pub class: String,
+    pub matched_classes: Vec<String>,
+    pub test_actor: String,
+    pub train_clips: usize,
+    pub test_clips: usize,
+    /// Synthesis metrics per set (original = the training clips themselves).
+    pub synth: BTreeMap<String, SynthScores>,
+    pub synth_clips: BTreeMap<String, usize>,
+    /// model -> condition -> errors.
+    pub predict: BTreeMap<String, BTreeMap<String, ConditionResult>>,
+    pub zero_velocity: Option<Horizons>,
+    pub vae_seconds: BTreeMap<String, f64>,
+    /// What the physical correction did (with [`SetKind::Physics`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physics: Option<PhysicsSummary>,
+}
+
+/// The table: its config, the cells computed so far, and the wall time.
+#[derive(Debug, Clone)]
+pub struct Table {
+    pub config: TableConfig,
+    pub cells: Vec<TableCell>,
+    /// Wall seconds from the start of the run to the last cell.
+    pub seconds: f64,
+}
+
+/// What a table run reports while it goes.
+pub trait Progress: Sync {
+    /// A line for a log (the CLI prints it on stderr).
+    fn line(&self, line: &str);
+    /// A cell is done: the table so far (the CLI rewrites table.json and
+    /// table.md, so a long run can be read while it goes). An error stops the run.
+    fn cell_done(&self, table: &Table) -> Result<()> {
+        let _ = table;
+        Ok(())
+    }
+}
+
+/// Any `Fn(&str)` is a progress that logs lines and ignores cells.
+impl<F: Fn(&str) + Sync> Progress for F {
+    fn line(&self, line: &str) {
+        self(line)
+    }
+}
+
+/// Loads one class of `data` with `actor` held out, and says what matched.
+pub fn load_fold(
+    data: &std::path::Path,
+    skeletons: Option<&std::path::Path>,
+    class: &str,
+    actor: &str,
+    log: crate::Log,
+) -> Result<Split> {
+    let split = dataset::load_split(data, skeletons.unwrap_or(data), class, actor)?;
+    log(&split.describe(class, actor));
+    Ok(split)
+}
+
+/// Computes the table `config` describes, cell by cell.
+pub fn run_table(config: &TableConfig, progress: &dyn Progress) -> Result<Table> {
+    config.validate()?;
+    let started = Instant::now();
+    let mut table = Table {
+        config: config.clone(),
+        cells: Vec::new(),
+        seconds: 0.0,
+    };
+    for actor in &config.test_actors {
+        for class in &config.classes {
+            progress.line(&format!(
+                "== {class}, test actor {actor} ({:.0} s so far)",
+                started.elapsed().as_secs_f64()
+            ));
+            let cell = run_cell(config, class, actor, progress)?;
+            table.cells.push(cell);
+            table.seconds = started.elapsed().as_secs_f64();
+            progress.cell_done(&table)?;
+        }
+    }
+    Ok(table)
+}
+
+/// One class of one test actor: its synthesised sets, their scores, the
+/// prediction models trained with each.
+fn run_cell(
+    config: &TableConfig,
+    class: &str,
+    actor: &str,
+    progress: &dyn Progress,
+) -> Result<TableCell> {
+    let log = |l: &str| progress.line(l);
+    let split = load_fold(
+        &config.data,
+        config.skeleton_dir.as_deref(),
+        class,
+        actor,
+        &log,
+    )?;
+    let mut cell = TableCell {
+        class: class.to_string(),
+        matched_classes: split.classes(),
+        test_actor: actor.to_string(),
+        train_clips: split.train.len(),
+        test_clips: split.test.len(),
+        ..Default::default()
+    };
+    let work = config.work.join(format!("{actor}_{class}"));
+    let sets = synthesised_sets(config, class, &split, &work, &mut cell, &log)?;
+
+    let t = Instant::now();
+    cell.synth
+        .insert("original".into(), synth_scores(&split.train, &split.test)?);
+    for (name, clips) in &sets {
+        cell.synth_clips.insert(name.clone(), clips.len());
+        if !clips.is_empty() {
+            cell.synth
+                .insert(name.clone(), synth_scores(clips, &split.test)?);
+        }
+    }
+    log(&format!(
+        "synthesis metrics in {:.1} s",
+        t.elapsed().as_secs_f64()
+    ));
+    if config.predict {
+        for &model in &config.models {
+            let (zero_velocity, by_condition) =
+                predict_conditions(config, model, &split, &sets, &log)?;
+            cell.zero_velocity = Some(zero_velocity);
+            cell.predict.insert(model.to_string(), by_condition);
+        }
+    }
+    Ok(cell)
+}
+
+/// A named synthesised set.
+type Set = (String, Vec<(String, Motion)>);
+
+/// The synthesised sets of a cell, in table order; VAE timings and the
+/// correction's summary go into `cell`.
+fn synthesised_sets(
+    config: &TableConfig,
+    class: &str,
+    split: &Split,
+    work: &std::path::Path,
+    cell: &mut TableCell,
+    log: crate::Log,
+) -> Result<Vec<Set>> {
+    let mut sets: Vec<Set> = Vec::new();
+    if config.has(SetKind::Noise) {
+        let noise = pipeline::Recipe::from_toml_str(&format!(
+            "seed = 1\n[[ops]]\nop = \"noise\"\ncopies = 10\nsigma_deg = {}\n",
+            config.noise_sigma_deg
+        ))?;
+        sets.push((
+            "noise".into(),
+            apply_recipe(&noise, 1, None, &split.train, log)?,
+        ));
+    }
+    if config.has(SetKind::Ik) {
+        let ik = pipeline::Recipe::from_toml_str(&format!(
+            "seed = 1\n[[ops]]\nop = \"ik\"\npreset = \"{}\"\ncopies = 10\n",
+            class.to_ascii_lowercase()
+        ))
+        .map_err(|e| EvalError::Config(format!("no IK preset for class `{class}`: {e}")))?;
+        sets.push(("ik".into(), apply_recipe(&ik, 1, None, &split.train, log)?));
+    }
+    let count = split.train.len() * 10;
+    let mut vae_runs = vec![];
+    if config.has(SetKind::Vae) {
+        vae_runs.push(("vae", None));
+        if config.vae_ablation {
+            vae_runs.push(("vae_noadv", Some(0.0)));
+        }
+    }
+    for (tag, weight) in vae_runs {
+        let t = Instant::now();
+        let cache = work.join(format!("{tag}-{}it", config.vae_iterations));
+        let model = cached_vae(&cache, &split.train, config.vae_iterations, weight, log)?;
+        cell.vae_seconds
+            .insert(tag.into(), t.elapsed().as_secs_f64());
+        sets.push((
+            format!("{tag}_near"),
+            sample_vae(&model, count, Prior::Near, 0)?,
+        ));
+        sets.push((
+            format!("{tag}_prior"),
+            sample_vae(&model, count, Prior::Normal, 0)?,
+        ));
+    }
+    if config.has(SetKind::Physics) {
+        let near = sets
+            .iter()
+            .find(|(n, _)| n == "vae_near")
+            .map(|(_, c)| c.as_slice())
+            .ok_or(EvalError::PhysicsNeedsVae)?;
+        let p = physics::correct_and_debias(&config.physics, &split.train, near, work, log)?;
+        sets.push(("vae_sub".into(), p.subset));
+        sets.push(("vae_corrected".into(), p.corrected));
+        sets.push(("vae_debiased".into(), p.debiased));
+        cell.physics = Some(p.summary);
+    }
+    Ok(sets)
+}
+
+/// One model's prediction error without augmentation and with each set of
+/// [`PREDICT_CONDITIONS`] that was made; and zero velocity's.
+fn predict_conditions(
+    config: &TableConfig,
+    model: ModelKind,
+    split: &Split,
+    sets: &[Set],
+    log: crate::Log,
+) -> Result<(Horizons, BTreeMap<String, ConditionResult>)> {
+    let protocol_config = config.train.config(model, split)?;
+    let test = TestSet::new(&split.test, &protocol_config)?;
+    let mut by_condition = BTreeMap::new();
+    let mut log_mut = |l: &str| log(l);
+    log(&format!("{model}: no_aug"));
+    by_condition.insert(
+        "no_aug".to_string(),
+        protocol::evaluate(&split.train, &test, &protocol_config, &mut log_mut)?,
+    );
+    for (name, clips) in sets {
+        if !PREDICT_CONDITIONS.contains(&name.as_str()) || clips.is_empty() {
+            continue;
+        }
+        log(&format!("{model}: {name}"));
+        let mut all = split.train.clone();
+        all.extend(clips.iter().cloned());
+        by_condition.insert(
+            name.clone(),
+            protocol::evaluate(&all, &test, &protocol_config, &mut log_mut)?,
+        );
+    }
+    Ok((test.zero_velocity(), by_condition))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> TableConfig {
+        TableConfig {
+            data: "data".into(),
+            work: "work".into(),
+            ..TableConfig::default()
+        }
+    }
+
+    #[test]
+    fn the_physics_set_needs_the_vae_set() {
+        let mut c = config();
+        assert!(c.validate().is_ok());
+        c.sets = vec![SetKind::Physics];
+        assert!(matches!(c.validate(), Err(EvalError::PhysicsNeedsVae)));
+        c.sets.push(SetKind::Vae);
+        assert!(c.validate().is_ok());
+        c.train.epochs = Some(0.0);
+        assert!(matches!(c.validate(), Err(EvalError::Config(_))));
+        assert!(matches!(
+            TableConfig::default().validate(),
+            Err(EvalError::Config(_))
+        ));
+    }
+
+    #[test]
+    fn set_kinds_read_and_print_as_the_json_names_them() {
+        for k in [SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::Physics] {
+            assert_eq!(k.to_string().parse::<SetKind>(), Ok(k));
+            assert_eq!(
+                serde_json::to_value(k).ok(),
+                Some(serde_json::Value::String(k.to_string()))
+            );
+        }
+        assert!("vaee".parse::<SetKind>().is_err());
+    }
+
+    #[test]
+    fn a_config_survives_json_and_missing_fields_are_the_defaults() {
+        let mut c = config();
+        c.sets.push(SetKind::Physics);
+        c.physics.correct_count = Some(3);
+        let text = serde_json::to_string(&c).expect("serialises");
+        assert_eq!(serde_json::from_str::<TableConfig>(&text).ok(), Some(c));
+        assert_eq!(
+            serde_json::from_str::<TableConfig>("{}").ok(),
+            Some(TableConfig::default())
+        );
+    }
+}

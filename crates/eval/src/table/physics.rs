@@ -1,0 +1,383 @@
+//! The physically corrected and debiased rows of the table.
+//!
+//! Why a module of its own: correction is minutes of PPO per clip, so the
+//! table corrects a subset of the VAE's near samples (spread evenly over the
+//! set), keeps the work in a folder so an interrupted table resumes where it
+//! stopped, and bounds each clip by environment samples rather than wall time,
+//! so that the rows do not depend on how busy the machine is.
+//!
+//! The jobs are the pipeline's own, run by its one executor
+//! (`pipeline::run_plan` of a `pipeline::plan::corrections` plan, as
+//! `motionaug augment` and the service's workers run theirs): correct the
+//! training clips (originals), correct the samples warm-started from the best
+//! corrected original's policy, train the debiasing network on the
+//! (corrected original, original) pairs of accepted corrections, apply it to
+//! the accepted corrected samples. What the table changes is in
+//! [`pipeline::Tune`]: at most `correct_samples` PPO samples per clip on one
+//! rollout thread, and the samples' corrections kept in `work/samples/`.
+
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use motion::Motion;
+use serde::{Deserialize, Serialize};
+
+use crate::Log;
+use crate::error::{EvalError, Result};
+
+/// How much physics the table spends; [`Default`] is the CLI's defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PhysicsConfig {
+    /// VAE near samples corrected per class and fold (`None`: 2 per training clip).
+    pub correct_count: Option<usize>,
+    /// Training clips corrected for the debiasing network (`None`: all).
+    pub correct_originals: Option<usize>,
+    /// PPO environment samples per clip at most (training stops earlier once
+    /// the clip reaches the target R_norm; a PPO iteration is 4096 samples).
+    pub correct_samples: u64,
+    /// Wall-time cap per clip, seconds (a safety net; samples are the budget).
+    pub correct_budget_s: f64,
+    /// Debiasing network optimiser steps.
+    pub debias_iterations: usize,
+}
+
+impl Default for PhysicsConfig {
+    fn default() -> Self {
+        PhysicsConfig {
+            correct_count: None,
+            correct_originals: None,
+            correct_samples: 40_960,
+            correct_budget_s: 600.0,
+            debias_iterations: 2000,
+        }
+    }
+}
+
+impl PhysicsConfig {
+    pub fn validate(&self) -> Result<()> {
+        if !(self.correct_budget_s.is_finite() && self.correct_budget_s > 0.0) {
+            return Err(EvalError::Config(
+                "the correction's time budget must be positive".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What the correction did to one set, for the table's JSON.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct PhysicsSummary {
+    pub originals: usize,
+    pub originals_accepted: usize,
+    /// (corrected, original) pairs the debiaser learnt from: the accepted originals.
+    pub debias_pairs: usize,
+    pub samples: usize,
+    pub samples_accepted: usize,
+    /// Mean R_norm of the corrected samples (final rollout).
+    pub mean_r_norm: f64,
+    /// Mean R_norm of the same samples tracked with action 0.
+    pub mean_r_norm_action0: f64,
+    pub mean_residual_force_ratio: f64,
+    /// PPO samples and wall seconds spent, originals and samples together.
+    pub ppo_samples: u64,
+    pub seconds: f64,
+}
+
+/// The three sets the table compares (the same samples before correction,
+/// after it, after debiasing) and what it cost.
+pub struct PhysicsSets {
+    pub subset: Vec<(String, Motion)>,
+    pub corrected: Vec<(String, Motion)>,
+    pub debiased: Vec<(String, Motion)>,
+    pub summary: PhysicsSummary,
+}
+
+/// `count` items spread evenly over `items` (all of them when there are fewer).
+pub fn spread<T: Clone>(items: &[T], count: usize) -> Vec<T> {
+    if count >= items.len() {
+        return items.to_vec();
+    }
+    (0..count)
+        .map(|i| items[i * items.len() / count].clone())
+        .collect()
+}
+
+/// The sample bound and the single rollout thread of every correction.
+fn tune(config: &PhysicsConfig) -> impl Fn(&mut correct::CorrectConfig) + Sync + use<> {
+    let max_samples = config.correct_samples;
+    move |c: &mut correct::CorrectConfig| {
+        // One rollout thread: the table runs one class per process, and two
+        // processes share this 2-core machine.
+        c.ppo.threads = 1;
+        c.max_samples = Some(max_samples);
+    }
+}
+
+/// What the run's events told about the corrections.
+#[derive(Default)]
+struct Seen {
+    /// Every correction's report, by clip.
+    reports: HashMap<String, correct::Report>,
+    /// Accepted corrected samples (before debiasing), by clip.
+    corrected: HashMap<String, Motion>,
+    done: usize,
+    job_started: Option<Instant>,
+    debias_started: Option<Instant>,
+    said_warm_start: bool,
+}
+
+/// Corrects `samples` (a subset of them, see [`PhysicsConfig`]) and the
+/// training clips in `work`, then debiases; finished corrections in `work`
+/// are reused, interrupted ones resumed.
+pub fn correct_and_debias(
+    config: &PhysicsConfig,
+    train: &[(String, Motion)],
+    samples: &[(String, Motion)],
+    work: &Path,
+    log: Log,
+) -> Result<PhysicsSets> {
+    let started = Instant::now();
+    let subset = spread(samples, config.correct_count.unwrap_or(2 * train.len()));
+    let originals = spread(train, config.correct_originals.unwrap_or(train.len()));
+    if originals.is_empty() || subset.is_empty() {
+        return Err(EvalError::Data(format!(
+            "nothing to correct ({} training clips, {} samples)",
+            originals.len(),
+            subset.len()
+        )));
+    }
+    let original_names: Vec<String> = originals.iter().map(|(n, _)| n.clone()).collect();
+    let sample_names: Vec<String> = subset.iter().map(|(n, _)| n.clone()).collect();
+    // Seeds as the table always had them: the originals 0.., then the samples.
+    let seeds: HashMap<&str, u64> = original_names
+        .iter()
+        .chain(&sample_names)
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i as u64))
+        .collect();
+    let step = pipeline::CorrectStep {
+        time_budget_s: config.correct_budget_s,
+        ..pipeline::CorrectStep::default()
+    };
+    let debias = debias::TrainConfig {
+        iterations: config.debias_iterations,
+        ..debias::TrainConfig::default()
+    };
+    let plan = pipeline::corrections(
+        &original_names,
+        &sample_names,
+        &step,
+        Some(&debias),
+        |name| seeds.get(name).copied().unwrap_or(0),
+    );
+    let clips: Vec<pipeline::Clip> = originals
+        .iter()
+        .map(|(name, m)| pipeline::Clip {
+            name: name.clone(),
+            source: name.clone(),
+            motion: m.clone(),
+        })
+        .collect();
+    let made: Vec<pipeline::WorkClip> = subset
+        .iter()
+        .map(|(name, m)| pipeline::WorkClip::given(name, m.clone()))
+        .collect();
+
+    let total = originals.len() + subset.len();
+    let seen = Mutex::new(Seen::default());
+    let on_event = |event: pipeline::Event<'_>| {
+        let Ok(mut seen) = seen.lock() else { return };
+        match event {
+            pipeline::Event::JobStarted { job } => {
+                seen.job_started = Some(Instant::now());
+                match &job.kind {
+                    pipeline::JobKind::Correct { .. } if !seen.said_warm_start => {
+                        seen.said_warm_start = true;
+                        log(&warm_start_line(&original_names, &seen.reports));
+                    }
+                    pipeline::JobKind::DebiasTrain { .. } => {
+                        seen.debias_started = Some(Instant::now())
+                    }
+                    _ => {}
+                }
+            }
+            pipeline::Event::Corrected {
+                job,
+                report,
+                motion,
+            } => {
+                seen.done += 1;
+                let Some(name) = job.kind.clip() else { return };
+                log(&format!(
+                    "correct {}/{total} {name}: R_norm {:.3} -> {:.3}, {} samples, {}, {:.1} s",
+                    seen.done,
+                    report.r_norm_action0,
+                    report.r_norm,
+                    report.samples,
+                    if report.accepted {
+                        "accepted"
+                    } else {
+                        "rejected"
+                    },
+                    seen.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                ));
+                if report.accepted && matches!(job.kind, pipeline::JobKind::Correct { .. }) {
+                    seen.corrected.insert(name.to_string(), motion.clone());
+                }
+                seen.reports.insert(name.to_string(), report.clone());
+            }
+            _ => {}
+        }
+    };
+    let tune_correction = tune(config);
+    let run = pipeline::run_plan(
+        &plan,
+        &clips,
+        made,
+        &pipeline::Options {
+            out: None,
+            work,
+            seed: 0,
+            on_event: &on_event,
+        },
+        pipeline::Tune {
+            correction: Some(&tune_correction),
+            corrections_folder: Some("samples"),
+        },
+    )?;
+    let seen = seen
+        .into_inner()
+        .map_err(|_| EvalError::Data("a correction's progress report panicked".into()))?;
+
+    let report = |name: &str| {
+        seen.reports
+            .get(name)
+            .ok_or_else(|| EvalError::Data(format!("`{name}` was not corrected")))
+    };
+    let mut summary = PhysicsSummary {
+        originals: originals.len(),
+        samples: subset.len(),
+        ..PhysicsSummary::default()
+    };
+    for name in &original_names {
+        let r = report(name);
+        // A missing report is a failed job, listed below.
+        if let Ok(r) = r {
+            summary.ppo_samples += r.samples;
+            summary.originals_accepted += usize::from(r.accepted);
+        }
+    }
+    // The accepted originals are exactly the debiaser's training pairs.
+    summary.debias_pairs = summary.originals_accepted;
+    let no_pairs = summary.originals_accepted == 0;
+    let rejected: HashSet<&str> = run.rejected.iter().map(String::as_str).collect();
+    let failures: Vec<String> = run
+        .failures
+        .iter()
+        .filter(|(key, _)| {
+            // Expected: nothing to debias (no accepted original, or the
+            // sample's own correction was rejected).
+            let expected = (key == "debias_train" && no_pairs)
+                || key
+                    .strip_prefix("debias_apply:")
+                    .is_some_and(|clip| no_pairs || rejected.contains(clip));
+            !expected
+        })
+        .map(|(key, reason)| format!("{key}: {reason}"))
+        .collect();
+    if !failures.is_empty() {
+        return Err(EvalError::Correction(failures.join("; ")));
+    }
+
+    let (mut r, mut r0, mut force) = (0.0, 0.0, 0.0);
+    for name in &sample_names {
+        let rep = report(name)?;
+        summary.ppo_samples += rep.samples;
+        r += rep.r_norm;
+        r0 += rep.r_norm_action0;
+        force += rep.residual_force_ratio;
+    }
+    let n = subset.len() as f64;
+    summary.mean_r_norm = r / n;
+    summary.mean_r_norm_action0 = r0 / n;
+    summary.mean_residual_force_ratio = force / n;
+    let corrected: Vec<(String, Motion)> = sample_names
+        .iter()
+        .filter_map(|name| Some((name.clone(), seen.corrected.get(name)?.clone())))
+        .collect();
+    summary.samples_accepted = corrected.len();
+
+    // The debiased clips are the run's outputs (debias_apply finishes them).
+    let mut outputs: HashMap<String, Motion> = run
+        .outputs
+        .into_iter()
+        .map(|o| (o.name, o.motion))
+        .collect();
+    let debiased: Vec<(String, Motion)> = corrected
+        .iter()
+        .filter_map(|(name, _)| Some((name.clone(), outputs.remove(name)?)))
+        .collect();
+    if no_pairs {
+        // Nothing to learn the simulation's bias from: the row stays empty.
+        log("debias: no original passed its correction; no debiased set");
+    } else {
+        log(&format!(
+            "debias: trained on {} pairs, applied to {} clips in {:.1} s",
+            summary.debias_pairs,
+            debiased.len(),
+            seen.debias_started
+                .map_or(0.0, |t| t.elapsed().as_secs_f64())
+        ));
+    }
+    summary.seconds = started.elapsed().as_secs_f64();
+    Ok(PhysicsSets {
+        subset,
+        corrected,
+        debiased,
+        summary,
+    })
+}
+
+/// Which original's policy the samples start from (the executor's choice:
+/// accepted first, then the highest R_norm).
+fn warm_start_line(originals: &[String], reports: &HashMap<String, correct::Report>) -> String {
+    let outcomes: Vec<(bool, f64)> = originals
+        .iter()
+        .map(|n| {
+            reports
+                .get(n)
+                .map_or((false, f64::NEG_INFINITY), |r| (r.accepted, r.r_norm))
+        })
+        .collect();
+    let Some(best) = pipeline::stages::best_warm_start(&outcomes) else {
+        return "warm start: no original to start from".into();
+    };
+    let (accepted, r_norm) = outcomes[best];
+    format!(
+        "warm start: samples start from the policy of {} (R_norm {r_norm:.3}, {})",
+        originals[best],
+        if accepted {
+            "accepted"
+        } else {
+            "no original was accepted"
+        }
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spread;
+
+    #[test]
+    fn spread_takes_evenly_spaced_items() {
+        let v: Vec<usize> = (0..10).collect();
+        assert_eq!(spread(&v, 3), vec![0, 3, 6]);
+        assert_eq!(spread(&v, 5), vec![0, 2, 4, 6, 8]);
+        assert_eq!(spread(&v, 10), v);
+        assert_eq!(spread(&v, 20), v);
+        assert!(spread(&v, 0).is_empty());
+    }
+}

@@ -1,0 +1,311 @@
+//! Datasets: upload (BVH, ASF/AMC, zip), listing, deletion, limits, tenant isolation.
+
+use crate::helpers::*;
+
+#[tokio::test]
+async fn upload_list_show_delete() {
+    let app = spawn_app(&[]).await;
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("walk.bvh", bvh(40)),
+                ("set.zip", zip_of(&[("dir/jump.bvh", bvh(12))])),
+            ],
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    let clips = body["clips"].as_array().unwrap();
+    assert_eq!(clips.len(), 2);
+    assert_eq!(clips[0]["name"], "walk");
+    assert_eq!(clips[0]["frames"], 40);
+    assert_eq!(clips[0]["joints"], 3);
+    assert!((clips[0]["fps"].as_f64().unwrap() - 30.0).abs() < 0.01);
+    assert_eq!(clips[1]["name"], "jump");
+    assert_eq!(clips[1]["frames"], 12);
+    let id = body["id"].as_str().unwrap();
+
+    let list: Value = app
+        .get("/v1/datasets")
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["datasets"].as_array().unwrap().len(), 1);
+    assert_eq!(list["datasets"][0]["clip_count"], 2);
+    let shown: Value = app
+        .get(&format!("/v1/datasets/{id}"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(shown["clips"], body["clips"]);
+    assert_eq!(shown["name"], "test set");
+
+    let r = app
+        .http
+        .delete(app.url(&format!("/v1/datasets/{id}")))
+        .bearer_auth(&app.key)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::NO_CONTENT);
+    let r = app.get(&format!("/v1/datasets/{id}")).send().await.unwrap();
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    assert_eq!(app.dataset_count().await, 0);
+    let clips: i64 = sqlx::query_scalar("SELECT count(*) FROM clips")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(clips, 0);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn bad_files_reject_the_whole_upload_and_name_the_problem() {
+    let app = spawn_app(&[]).await;
+    // A broken frame line in the second file: nothing is stored.
+    let mut broken = bvh(10);
+    let text = String::from_utf8(broken.clone())
+        .unwrap()
+        .replace("Frame Time: 0.033333\n0.000", "Frame Time: 0.033333\nabc");
+    broken = text.into_bytes();
+    let r = app
+        .upload(&app.key, &[("good.bvh", bvh(10)), ("bad.bvh", broken)])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "bad.bvh");
+    assert!(body["line"].as_u64().is_some(), "{body}");
+    assert!(body["detail"].as_str().unwrap().contains("bad.bvh"));
+    assert_eq!(app.dataset_count().await, 0);
+
+    let r = app
+        .upload(&app.key, &[("notes.txt", b"hello".to_vec())])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(body["detail"].as_str().unwrap().contains("notes.txt"));
+
+    let r = app
+        .upload(&app.key, &[("a.bvh", bvh(5)), ("x/a.bvh", bvh(5))])
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        body["detail"].as_str().unwrap().contains("unique"),
+        "{body}"
+    );
+
+    let r = app
+        .upload(
+            &app.key,
+            &[(
+                "motion.amc",
+                b":FULLY-SPECIFIED\n1\nroot 0 0 0 0 0 0\n".to_vec(),
+            )],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "motion.amc");
+
+    let r = app
+        .upload(&app.key, &[("junk.zip", b"PK not a zip".to_vec())])
+        .await;
+    assert_eq!(problem(r).await.0, StatusCode::UNPROCESSABLE_ENTITY);
+
+    let r = app
+        .http
+        .post(app.url("/v1/datasets"))
+        .bearer_auth(&app.key)
+        .multipart(Form::new().text("name", "empty"))
+        .send()
+        .await
+        .unwrap();
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["field"], "file");
+    assert_eq!(app.dataset_count().await, 0);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn limits_on_body_size_file_count_and_frames() {
+    let app = spawn_app(&[]).await;
+    // Body limit is 1 MiB in these tests.
+    let big = vec![b' '; 2 << 20];
+    let r = app.upload(&app.key, &[("big.bvh", big)]).await;
+    assert_eq!(problem(r).await.0, StatusCode::PAYLOAD_TOO_LARGE);
+    // At most 5 files, zip entries included.
+    let entries: Vec<(String, Vec<u8>)> = (0..6).map(|i| (format!("c{i}.bvh"), bvh(3))).collect();
+    let refs: Vec<(&str, Vec<u8>)> = entries
+        .iter()
+        .map(|(n, b)| (n.as_str(), b.clone()))
+        .collect();
+    let r = app.upload(&app.key, &[("many.zip", zip_of(&refs))]).await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+    assert!(body["detail"].as_str().unwrap().contains("at most 5"));
+    // At most 500 frames per clip.
+    let r = app.upload(&app.key, &[("long.bvh", bvh(501))]).await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+    assert_eq!(body["file"], "long.bvh");
+    // Recipes are JSON bodies with their own limit.
+    let (dataset, _) = upload_one(&app).await;
+    let huge = json!({"ops": [{"op": "noise", "pad": "x".repeat(5 << 20)}]});
+    let r = app.augment(&dataset, &huge).await;
+    assert_eq!(r.status(), StatusCode::PAYLOAD_TOO_LARGE);
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
+fn example(name: &str) -> Vec<u8> {
+    std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../examples/data")
+            .join(name),
+    )
+    .unwrap()
+}
+
+#[tokio::test]
+async fn amc_clips_pair_with_the_asf_of_their_upload() {
+    let app = spawn_app(&[]).await;
+    let asf = example("HDM_bd.asf");
+    let kick = example("HDM_bd_kickLFront1Reps_001_120.amc");
+    // Two skeletons: the AMC takes the one whose name prefixes its own.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("HDM_xx.asf", asf.clone()),
+                ("HDM_bd.asf", asf.clone()),
+                ("HDM_bd_kickLFront1Reps_001_120.amc", kick.clone()),
+            ],
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["clips"].as_array().unwrap().len(), 1);
+    assert_eq!(body["clips"][0]["name"], "HDM_bd_kickLFront1Reps_001_120");
+    assert_eq!(body["clips"][0]["fps"], 120.0);
+    assert_eq!(body["clips"][0]["joints"], 31);
+    let skeleton: String = sqlx::query_scalar("SELECT skeleton_name FROM clips")
+        .fetch_one(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(skeleton, "HDM_bd.asf");
+    // Several skeletons and none fits: refused, naming the AMC.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("a.asf", asf.clone()),
+                ("b.asf", asf.clone()),
+                ("kick.amc", kick.clone()),
+            ],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "kick.amc");
+    // A broken ASF is named with its line.
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("bad.asf", b":bonedata\n begin\n   id x\n".to_vec()),
+                ("k.amc", kick),
+            ],
+        )
+        .await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "bad.asf");
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
+/// The upload limit, not the 4 MiB limit of JSON bodies, applies to uploads.
+#[tokio::test]
+async fn uploads_larger_than_json_bodies_are_accepted() {
+    let app = spawn_app(&[
+        ("MOTIONAUG_MAX_UPLOAD_BYTES", "16777216"),
+        ("MOTIONAUG_MAX_FRAMES", "1000000"),
+    ])
+    .await;
+    let big = bvh(150_000);
+    assert!(big.len() > 5 << 20, "{} bytes", big.len());
+    let r = app.upload(&app.key, &[("long.bvh", big)]).await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["clips"][0]["frames"], 150_000);
+    app.cleanup().await;
+}
+
+#[tokio::test]
+async fn tenants_never_see_each_other() {
+    let app = spawn_app(&[]).await;
+    let other = motionaug_coordinator::auth::create_key(&app.db, "beta")
+        .await
+        .unwrap();
+    let (dataset, _) = upload_one(&app).await;
+    let aug: Value = app
+        .augment(&dataset, &noise_recipe())
+        .await
+        .json()
+        .await
+        .unwrap();
+    let aug = aug["id"].as_str().unwrap();
+    let as_other =
+        |m: reqwest::Method, p: String| app.http.request(m, app.url(&p)).bearer_auth(&other);
+    let list: Value = as_other(reqwest::Method::GET, "/v1/datasets".into())
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["datasets"].as_array().unwrap().len(), 0);
+    for (method, path) in [
+        (reqwest::Method::GET, format!("/v1/datasets/{dataset}")),
+        (reqwest::Method::DELETE, format!("/v1/datasets/{dataset}")),
+        (
+            reqwest::Method::GET,
+            format!("/v1/datasets/{dataset}/augmentations"),
+        ),
+        (reqwest::Method::GET, format!("/v1/augmentations/{aug}")),
+        (
+            reqwest::Method::GET,
+            format!("/v1/augmentations/{aug}/events"),
+        ),
+        (
+            reqwest::Method::GET,
+            format!("/v1/augmentations/{aug}/results"),
+        ),
+        (reqwest::Method::DELETE, format!("/v1/augmentations/{aug}")),
+    ] {
+        let r = as_other(method.clone(), path.clone()).send().await.unwrap();
+        assert_eq!(r.status(), StatusCode::NOT_FOUND, "{method} {path}");
+    }
+    let r = as_other(
+        reqwest::Method::POST,
+        format!("/v1/datasets/{dataset}/augmentations"),
+    )
+    .json(&noise_recipe())
+    .send()
+    .await
+    .unwrap();
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    // Still there and untouched for its owner.
+    assert_eq!(app.status(aug).await["status"], "queued");
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
