@@ -4,8 +4,9 @@
 //! what the character did.
 //!
 //! Training stops at the first of: the deterministic rollout reaching
-//! `target_r_norm` with an accepted mean reward, the time budget, or the
-//! iteration / sample limits. The curve is reported either way.
+//! `target_r_norm` and passing every acceptance criterion
+//! ([`crate::acceptance`]), the time budget, or the iteration / sample
+//! limits. The curve is reported either way.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -17,6 +18,7 @@ use physics::{ImitationEnv, Residual};
 use ppo::{Control, PpoConfig, RunLimits, StopReason, Trainer};
 
 use crate::CorrectError;
+use crate::acceptance::{AcceptanceConfig, Criterion, all_passed, judge};
 use crate::report::{Report, curve_svg};
 use crate::rollout::{Rollout, deterministic_rollout};
 use crate::task::ImitationTask;
@@ -34,10 +36,14 @@ pub struct CorrectConfig {
     pub max_samples: Option<u64>,
     /// Run the deterministic rollout every this many iterations.
     pub eval_every: u64,
-    /// Stop once a rollout reaches this R_norm with an accepted mean reward.
+    /// Stop once a rollout reaches this R_norm and passes every acceptance
+    /// criterion.
     pub target_r_norm: Option<f64>,
-    /// Mean per-step reward needed to accept the corrected clip (paper: 0.7).
-    pub accept_threshold: f64,
+    /// When a corrected clip is accepted ([`crate::acceptance`]).
+    pub acceptance: AcceptanceConfig,
+    /// Hand the balance from the PD-residual root force to the policy over
+    /// training.
+    pub residual_schedule: ResidualSchedule,
     pub checkpoint_every_s: f64,
     pub seed: u64,
     /// Start a fresh run from the policy, value and normaliser of another job's
@@ -77,7 +83,8 @@ impl Default for CorrectConfig {
             max_samples: None,
             eval_every: 1,
             target_r_norm: Some(0.8),
-            accept_threshold: 0.7,
+            acceptance: AcceptanceConfig::default(),
+            residual_schedule: ResidualSchedule::default(),
             checkpoint_every_s: 120.0,
             seed: 0,
             warm_start: None,
@@ -101,14 +108,49 @@ impl CorrectConfig {
         if self.eval_every == 0 {
             return bad("eval_every must be at least 1".into());
         }
-        if !(0.0..=1.0).contains(&self.accept_threshold) {
-            return bad(format!(
-                "accept threshold {} is not in [0, 1]",
-                self.accept_threshold
-            ));
-        }
+        self.acceptance.validate()?;
+        self.residual_schedule.validate()?;
         self.ppo.validate()?;
         self.physics.substeps()?;
+        Ok(())
+    }
+}
+
+/// The PD-residual gains over training: from MotionAug's (scale 1) down to
+/// `final_scale` of them, linearly over `over_iterations` PPO iterations, so
+/// the policy learns the balance the root force gave. The rollouts that judge
+/// the clip run at the scale reached. `final_scale` 1 keeps the gains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResidualSchedule {
+    pub final_scale: f32,
+    pub over_iterations: u64,
+}
+
+impl Default for ResidualSchedule {
+    fn default() -> Self {
+        ResidualSchedule {
+            final_scale: 1.0,
+            over_iterations: 1,
+        }
+    }
+}
+
+impl ResidualSchedule {
+    /// The gain scale after `iterations` PPO iterations.
+    pub fn scale(&self, iterations: u64) -> f32 {
+        let t = (iterations as f32 / self.over_iterations.max(1) as f32).min(1.0);
+        1.0 - (1.0 - self.final_scale) * t
+    }
+
+    fn validate(&self) -> Result<(), CorrectError> {
+        if !(self.final_scale.is_finite() && (0.0..=1.0).contains(&self.final_scale))
+            || self.over_iterations == 0
+        {
+            return Err(CorrectError::Config(format!(
+                "residual schedule: final scale {} must be in [0, 1] over at least one iteration",
+                self.final_scale
+            )));
+        }
         Ok(())
     }
 }
@@ -165,6 +207,7 @@ pub fn correct(
         .map(|_| ImitationEnv::new(motion, &config.physics).map(ImitationTask::new))
         .collect::<Result<Vec<_>, _>>()?;
     let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
+    let before = motion::metrics::plausibility(motion);
     let action0 = deterministic_rollout(&mut eval_env, |_, a| {
         a.fill(0.0);
         Ok(())
@@ -183,6 +226,20 @@ pub fn correct(
         }
         trainer
     };
+
+    // Training environments run at the scale of the iteration to come; the
+    // rollouts that judge the policy at the scale it was last trained at.
+    let schedule = config.residual_schedule;
+    let train_scale = |trainer: &mut Trainer<ImitationTask>| {
+        let scale = schedule.scale(trainer.progress().iterations);
+        for task in trainer.envs_mut() {
+            task.env.set_residual_scale(scale);
+        }
+    };
+    let judged_scale = |trainer: &Trainer<ImitationTask>| {
+        schedule.scale(trainer.progress().iterations.saturating_sub(1))
+    };
+    train_scale(&mut trainer);
 
     let limits = RunLimits {
         time_budget_s: Some(config.time_budget_s),
@@ -207,18 +264,21 @@ pub fn correct(
     let reason = trainer.run(&limits, |trainer, it| {
         let mut r_norm = None;
         if it.iteration % config.eval_every == 0 {
+            eval_env.set_residual_scale(judged_scale(trainer));
             match evaluate(trainer, &mut eval_env) {
                 Ok(rollout) => {
                     let r = rollout.r_norm();
                     trainer.record_eval(r);
                     r_norm = Some(r);
-                    let accepted = rollout.fell_at.is_none()
-                        && rollout.mean_reward() >= config.accept_threshold;
-                    reached_target = accepted && config.target_r_norm.is_some_and(|t| r >= t);
+                    // Judging costs a forward-kinematics pass over the clip:
+                    // only when the R_norm target is met.
+                    reached_target = config.target_r_norm.is_some_and(|t| r >= t)
+                        && accepted(&rollout, &before, &config.acceptance);
                 }
                 Err(err) => eval_error = Some(err),
             }
         }
+        train_scale(trainer);
         on_progress(&ProgressEvent {
             iteration: it.iteration,
             samples: it.samples,
@@ -246,7 +306,10 @@ pub fn correct(
         "training stopped"
     );
 
+    eval_env.set_residual_scale(judged_scale(&trainer));
     let final_rollout = evaluate(&trainer, &mut eval_env)?;
+    let after = motion::metrics::plausibility(&final_rollout.motion);
+    let criteria = judge(&final_rollout, &before, &after, &config.acceptance);
     let progress = trainer.progress();
     // The curve starts at the untrained tracker (action 0, which the fresh
     // policy's near-zero output layer approximates), then one point per evaluation.
@@ -274,24 +337,40 @@ pub fn correct(
         wall_s: progress.wall_s,
         iterations: progress.iterations,
         curve,
-        accepted: final_rollout.fell_at.is_none()
-            && final_rollout.mean_reward() >= config.accept_threshold,
-        accept_threshold: config.accept_threshold,
+        accepted: all_passed(&criteria),
+        rejected_because: criteria
+            .iter()
+            .filter(|c| !c.passed)
+            .map(Criterion::failure)
+            .collect(),
+        criteria,
+        accept_threshold: config.acceptance.min_mean_reward,
         fell_at: final_rollout.fell_at,
         r_norm_action0: action0.r_norm(),
         stop_reason: stop_reason.to_string(),
         residual: residual_name(config.physics.residual).to_string(),
+        residual_scale: eval_env.residual_scale() as f64,
         fps: final_rollout.motion.fps(),
         frames: final_rollout.motion.frames(),
         warm_start: warm_from,
-        plausibility_before: motion::metrics::plausibility(motion),
-        plausibility_after: motion::metrics::plausibility(&final_rollout.motion),
+        plausibility_before: before,
+        plausibility_after: after,
     };
     write_outputs(out_dir, &final_rollout, &report)?;
     Ok(Outcome {
         motion: final_rollout.motion,
         report,
     })
+}
+
+/// Whether `rollout` passes every acceptance criterion.
+fn accepted(
+    rollout: &Rollout,
+    before: &motion::metrics::Plausibility,
+    config: &AcceptanceConfig,
+) -> bool {
+    let after = motion::metrics::plausibility(&rollout.motion);
+    all_passed(&judge(rollout, before, &after, config))
 }
 
 fn evaluate(
@@ -339,4 +418,28 @@ fn write_outputs(out_dir: &Path, rollout: &Rollout, report: &Report) -> Result<(
         motion::io::write_atomic(&path, &bytes)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_residual_schedule_lowers_the_gains_linearly_then_holds() {
+        let s = ResidualSchedule {
+            final_scale: 0.2,
+            over_iterations: 4,
+        };
+        let scales: Vec<f32> = (0..7).map(|i| s.scale(i)).collect();
+        let want = [1.0, 0.8, 0.6, 0.4, 0.2, 0.2, 0.2];
+        for (got, want) in scales.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{scales:?}");
+        }
+        assert_eq!(ResidualSchedule::default().scale(1000), 1.0);
+        let bad = ResidualSchedule {
+            final_scale: 1.5,
+            over_iterations: 4,
+        };
+        assert!(bad.validate().is_err());
+    }
 }

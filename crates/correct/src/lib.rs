@@ -5,9 +5,13 @@
 //! * [`task`]: the physics imitation environment seen as a [`ppo::Env`].
 //! * [`rollout`]: the deterministic whole-clip rollout that yields the corrected
 //!   motion and the paper's figures (R_norm, mean reward, residual force ratio).
+//! * [`acceptance`]: when a corrected clip is physically honest (no fall, mean
+//!   reward, residual force, foot skating, feet on their soles), each criterion
+//!   judged and reported.
 //! * [`job`]: one correction job: train within a budget, evaluate, checkpoint,
 //!   resume, and write the outputs.
 //! * [`report`]: `report.json` and the learning-curve SVG.
+//! * [`summary`]: the corrections of a class in one table (`motionaug bench correction`).
 //!
 //! Measured on 2026-11-22 (2-core machine, release build, defaults: [256, 256]
 //! nets, 8 envs, 2 threads, 4096 samples per iteration; `motionaug correct
@@ -50,12 +54,15 @@
 //! the clip's median-frame foot level (a few mm for these clips; 5 cm for VAE
 //! samples that sank, see crates/eval/README.md).
 
+pub mod acceptance;
 pub mod job;
 pub mod report;
 pub mod rollout;
+pub mod summary;
 pub mod task;
 
-pub use job::{CorrectConfig, Outcome, correct};
+pub use acceptance::{AcceptanceConfig, Criterion};
+pub use job::{CorrectConfig, Outcome, ResidualSchedule, correct};
 pub use report::Report;
 pub use rollout::{Rollout, deterministic_rollout};
 

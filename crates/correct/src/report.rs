@@ -1,6 +1,8 @@
 //! `report.json` and the learning-curve plot written next to a corrected clip.
 
 use motion::metrics::Plausibility;
+
+use crate::acceptance::Criterion;
 use serde::{Deserialize, Serialize};
 
 /// Everything a user needs to judge one correction.
@@ -22,8 +24,15 @@ pub struct Report {
     /// Learning curve: [wall_s, samples, r_norm] of deterministic rollouts; the
     /// first point is the untrained tracker (action 0) at [0, 0, r_norm_action0].
     pub curve: Vec<[f64; 3]>,
-    /// Mean reward >= `accept_threshold` and no fall (paper: 0.7).
+    /// Every acceptance criterion passed ([`crate::acceptance`]).
     pub accepted: bool,
+    /// Each criterion with its value, limit and verdict.
+    #[serde(default)]
+    pub criteria: Vec<Criterion>,
+    /// The failed criteria, one line each (empty when accepted).
+    #[serde(default)]
+    pub rejected_because: Vec<String>,
+    /// The mean-reward limit (paper: 0.7); the others are in `criteria`.
     pub accept_threshold: f64,
     /// Control step at which the character fell in the final rollout, if it did.
     pub fell_at: Option<usize>,
@@ -33,6 +42,10 @@ pub struct Report {
     pub stop_reason: String,
     /// Root force used: pd, none or learned.
     pub residual: String,
+    /// Factor on the PD-residual gains in the rollout that produced the clip
+    /// (1 = MotionAug's; lower after a schedule handed balance to the policy).
+    #[serde(default = "one")]
+    pub residual_scale: f64,
     /// Frame rate of the corrected clip (the control rate).
     pub fps: f64,
     pub frames: usize,
@@ -41,6 +54,10 @@ pub struct Report {
     pub warm_start: Option<String>,
     pub plausibility_before: Plausibility,
     pub plausibility_after: Plausibility,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// The learning curve (R_norm against wall time) as a small standalone SVG.

@@ -5,7 +5,8 @@
 //! Its figures are the paper's: R_norm = (1/T) sum_t r_imit_t / r_imit_max over
 //! the T control steps of the clip (r_imit_max = 1; steps after a fall count 0),
 //! the mean per-step reward over the same T steps, and the residual force ratio
-//! mean |F_res| / (m g) over the steps simulated.
+//! mean |F_res| / (m g) over the steps simulated. It also keeps how the feet met
+//! the floor after every step, which [`crate::acceptance`] judges.
 
 use motion::Motion;
 use physics::ImitationEnv;
@@ -25,6 +26,8 @@ pub struct Rollout {
     pub residual_force: Vec<f32>,
     /// Step at which the character fell, if it did.
     pub fell_at: Option<usize>,
+    /// How each simulated foot met the floor after each step.
+    pub feet: Vec<Vec<physics::FootContact>>,
     pub total_mass_kg: f64,
     /// What the simulated character did, on the clip's own skeleton, at the
     /// control rate.
@@ -64,6 +67,7 @@ where
     let mut r_imit = Vec::with_capacity(clip_steps);
     let mut residual_force = Vec::with_capacity(clip_steps);
     let mut fell_at = None;
+    let mut feet = Vec::with_capacity(clip_steps);
     for t in 0..clip_steps {
         act(&obs, &mut action)?;
         let step = env.step(&action)?;
@@ -71,6 +75,7 @@ where
         rewards.push(step.reward);
         r_imit.push(step.r_imit);
         residual_force.push(step.info.residual_force);
+        feet.push(env.foot_contacts());
         if step.terminated {
             fell_at = Some(t);
             break;
@@ -87,6 +92,7 @@ where
         r_imit,
         residual_force,
         fell_at,
+        feet,
         total_mass_kg: env.spec().total_mass as f64,
         motion,
     })

@@ -55,10 +55,41 @@ fn short_job_writes_honest_outputs_and_resumes() {
         "the action-0 point and one per iteration"
     );
     assert_eq!(report.curve[0], [0.0, 0.0, report.r_norm_action0]);
+    // Accepted exactly when every criterion passed, each judged on the
+    // figures the report gives.
+    let names: Vec<&str> = report.criteria.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "no_fall",
+            "mean_reward",
+            "residual_force",
+            "foot_skating",
+            "soles_flat"
+        ]
+    );
     assert_eq!(
         report.accepted,
-        report.fell_at.is_none() && report.mean_reward >= 0.7
+        report.criteria.iter().all(|c| c.passed),
+        "{:?}",
+        report.criteria
     );
+    assert_eq!(
+        report.rejected_because.len(),
+        report.criteria.iter().filter(|c| !c.passed).count()
+    );
+    let by = |n: &str| report.criteria.iter().find(|c| c.name == n).unwrap();
+    assert_eq!(by("mean_reward").value, report.mean_reward);
+    assert_eq!(by("residual_force").value, report.residual_force_ratio);
+    assert_eq!(
+        by("residual_force").passed,
+        report.residual_force_ratio <= 0.1
+    );
+    assert_eq!(
+        by("foot_skating").value,
+        report.plausibility_after.foot_skating_m_s
+    );
+    assert!(by("foot_skating").limit <= report.plausibility_before.foot_skating_m_s);
 
     // Honest: the corrected clip is the simulated character, not the reference.
     let corrected =
@@ -94,6 +125,57 @@ fn short_job_writes_honest_outputs_and_resumes() {
     assert_eq!(resumed.report.iterations, 3);
     assert!(resumed.report.samples > report.samples);
     assert_eq!(resumed.report.curve[..3], report.curve[..]);
+}
+
+/// The untrained tracker (action 0) keeps the kick up only with the root
+/// force's help: the acceptance names that hand of god, whatever its reward.
+#[test]
+fn a_clip_held_up_by_the_root_force_is_rejected() {
+    let config = CorrectConfig::default();
+    let clip = kick();
+    let mut env = physics::ImitationEnv::new(&clip, &config.physics).unwrap();
+    let rollout = correct::deterministic_rollout(&mut env, |_, a| {
+        a.fill(0.0);
+        Ok(())
+    })
+    .unwrap();
+    let before = motion::metrics::plausibility(&clip);
+    let after = motion::metrics::plausibility(&rollout.motion);
+    let criteria = correct::acceptance::judge(&rollout, &before, &after, &config.acceptance);
+    let residual = criteria
+        .iter()
+        .find(|c| c.name == "residual_force")
+        .unwrap();
+    assert!(
+        rollout.residual_force_ratio() > 0.1 && !residual.passed,
+        "{criteria:?}"
+    );
+    assert!(!correct::acceptance::all_passed(&criteria));
+    // Its planted feet were judged: the kick stands on one foot throughout.
+    let soles = correct::acceptance::SoleStats::of(&rollout.feet, &config.acceptance);
+    assert!(soles.planted_frames > 10, "{soles:?}");
+}
+
+/// Feet built in the frame of the standing foot stand on their soles: with
+/// the untrained tracker on the bundled kick, the rest-pose boxes stand on a
+/// corner (no planted frame flat) and the calibrated ones mostly flat.
+#[test]
+fn calibrated_feet_stand_on_their_soles() {
+    let clip = kick();
+    let flat = |calibrate: bool| {
+        let mut config = CorrectConfig::default();
+        config.physics.character.calibrate_feet = calibrate;
+        let mut env = physics::ImitationEnv::new(&clip, &config.physics).unwrap();
+        let rollout = correct::deterministic_rollout(&mut env, |_, a| {
+            a.fill(0.0);
+            Ok(())
+        })
+        .unwrap();
+        correct::acceptance::SoleStats::of(&rollout.feet, &config.acceptance)
+    };
+    let (rest, calibrated) = (flat(false), flat(true));
+    assert!(rest.flat_fraction() < 0.1, "{rest:?}");
+    assert!(calibrated.flat_fraction() > 0.5, "{calibrated:?}");
 }
 
 #[test]

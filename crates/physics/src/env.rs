@@ -143,6 +143,21 @@ pub struct StepInfo {
     pub frame: usize,
 }
 
+/// How one simulated foot meets the floor (the simulated floor is y = 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FootContact {
+    /// Height of the sole's heel above the floor, m (see
+    /// [`CharacterSpec::sole_points`]; the lowest point of the foot's shape
+    /// when it is not a box).
+    pub heel_m: f32,
+    /// Height of the sole's toe above the floor, m.
+    pub toe_m: f32,
+    /// Horizontal speed of the sole's midpoint, m/s.
+    pub speed_m_s: f32,
+    /// The foot's collider touches the ground.
+    pub touching: bool,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepResult {
     pub reward: f32,
@@ -174,6 +189,9 @@ pub struct ImitationEnv {
     recorded: Vec<(Vec3, Quat)>,
     recorded_frames: Vec<usize>,
     record: bool,
+    /// Factor on the PD-residual gains (1 = MotionAug's; see
+    /// [`ImitationEnv::set_residual_scale`]).
+    residual_scale: f32,
 }
 
 /// What the physics substeps of one control step did.
@@ -266,6 +284,7 @@ impl ImitationEnv {
             recorded: Vec::new(),
             recorded_frames: Vec::new(),
             record: true,
+            residual_scale: 1.0,
             spec,
         };
         env.reset(0.0);
@@ -318,6 +337,21 @@ impl ImitationEnv {
     /// Current observation.
     pub fn obs(&self) -> &[f32] {
         &self.obs
+    }
+
+    /// Scale the PD-residual gains by `scale` (in [0, 1]; 1 by default): a
+    /// training schedule lowers it so that the policy, not the root force,
+    /// learns to keep the balance. Takes effect at the next step.
+    pub fn set_residual_scale(&mut self, scale: f32) {
+        self.residual_scale = if scale.is_finite() {
+            scale.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+    }
+
+    pub fn residual_scale(&self) -> f32 {
+        self.residual_scale
     }
 
     /// Turn recording of simulated frames on or off (on by default).
@@ -551,7 +585,7 @@ impl ImitationEnv {
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.
     fn pd_residual(&self, r: &BodyState, root: &BodyState) -> (Vec3, Vec3) {
-        let [kp, kd, kpr, kdr] = self.config.residual_gains;
+        let [kp, kd, kpr, kdr] = self.config.residual_gains.map(|g| g * self.residual_scale);
         (
             kp * (r.pos - root.pos) + kd * (r.vel - root.vel),
             kpr * axis_angle(r.rot * root.rot.inverse()) + kdr * (r.angvel - root.angvel),
@@ -743,5 +777,29 @@ impl ImitationEnv {
     /// Current simulated state of every body.
     pub fn body_states(&self) -> &[BodyState] {
         &self.sim.state
+    }
+
+    /// How each foot (in [`CharacterSpec::feet`] order) meets the floor now.
+    pub fn foot_contacts(&self) -> Vec<FootContact> {
+        self.spec
+            .feet
+            .iter()
+            .map(|&b| {
+                let s = self.sim.state[b];
+                let [heel, toe] = self.spec.sole_points(b).unwrap_or_else(|| {
+                    let c = self.spec.bodies[b].com_local;
+                    [c, c]
+                });
+                let (heel, toe) = (s.pos + s.rot * heel, s.pos + s.rot * toe);
+                let mid = 0.5 * (heel + toe);
+                let v = s.vel + s.angvel.cross(mid - s.pos);
+                FootContact {
+                    heel_m: heel.y,
+                    toe_m: toe.y,
+                    speed_m_s: Vec3::new(v.x, 0.0, v.z).length(),
+                    touching: self.sim.touches_ground(b),
+                }
+            })
+            .collect()
     }
 }

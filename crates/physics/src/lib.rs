@@ -41,7 +41,7 @@ pub use bench::{BenchReport, bench_physics};
 pub use character::{
     CharacterOptions, CharacterSpec, FootCalibration, JointMapping, MappingLine, Role, Shape, Side,
 };
-pub use env::{Config, ImitationEnv, OutputFrame, Residual, StepInfo, StepResult};
+pub use env::{Config, FootContact, ImitationEnv, OutputFrame, Residual, StepInfo, StepResult};
 pub use sim::{BodyState, Sim, SimParams};
 
 #[derive(Debug, thiserror::Error)]

@@ -19,6 +19,12 @@ pub struct CorrectionSummary {
     pub penetration_after_m: f64,
     pub floating_before: f64,
     pub floating_after: f64,
+    /// Each acceptance criterion with its value, limit and verdict (as in the report).
+    #[serde(default)]
+    pub criteria: Vec<correct::Criterion>,
+    /// The failed criteria, one line each (empty when accepted).
+    #[serde(default)]
+    pub rejected_because: Vec<String>,
     /// The job's report, relative to the output directory (CLI only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<String>,
@@ -40,6 +46,8 @@ impl CorrectionSummary {
             penetration_after_m: a.penetration_mean_m,
             floating_before: b.floating_fraction,
             floating_after: a.floating_fraction,
+            criteria: report.criteria.clone(),
+            rejected_because: report.rejected_because.clone(),
             report: path,
         }
     }

@@ -23,7 +23,12 @@
 //! [correct]                 # every new clip through physical correction
 //! time_budget_s = 300
 //! residual = "pd"           # pd | none | learned
-//! keep_rejected = false
+//! keep_rejected = false     # keep clips that fail acceptance (marked in the manifest)
+//! accept_threshold = 0.7    # acceptance (correct::acceptance): mean reward at least,
+//! max_residual_force_ratio = 0.1  # root force / body weight at most,
+//! max_foot_skating_m_s = 0.1      # skating at most,
+//! skating_at_most_input = true    # and at most the input's,
+//! min_sole_flat_fraction = 0.9    # planted frames on the sole at least
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
@@ -128,6 +133,14 @@ pub struct CorrectStep {
     pub target_r_norm: f64,
     /// Mean per-step reward a corrected clip needs to be kept (paper: 0.7).
     pub accept_threshold: f64,
+    /// Largest mean root residual force accepted, as a fraction of body weight.
+    pub max_residual_force_ratio: f64,
+    /// Largest foot skating of a corrected clip, m/s.
+    pub max_foot_skating_m_s: f64,
+    /// A corrected clip must also skate no more than its input.
+    pub skating_at_most_input: bool,
+    /// Smallest fraction of planted foot frames standing on the sole.
+    pub min_sole_flat_fraction: f64,
     /// Keep clips whose correction was not accepted (marked in the manifest).
     pub keep_rejected: bool,
     /// Correct each original first and start its variants from its policy.
@@ -161,7 +174,11 @@ impl Default for CorrectStep {
             time_budget_s: c.time_budget_s,
             residual: ResidualKind::Pd,
             target_r_norm: c.target_r_norm.unwrap_or(0.8),
-            accept_threshold: c.accept_threshold,
+            accept_threshold: c.acceptance.min_mean_reward,
+            max_residual_force_ratio: c.acceptance.max_residual_force_ratio,
+            max_foot_skating_m_s: c.acceptance.max_foot_skating_m_s,
+            skating_at_most_input: c.acceptance.skating_at_most_input,
+            min_sole_flat_fraction: c.acceptance.min_flat_fraction,
             keep_rejected: false,
             warm_start: true,
             envs: c.envs,
@@ -175,7 +192,14 @@ impl CorrectStep {
         let mut c = correct::CorrectConfig {
             time_budget_s: self.time_budget_s,
             target_r_norm: Some(self.target_r_norm),
-            accept_threshold: self.accept_threshold,
+            acceptance: correct::AcceptanceConfig {
+                min_mean_reward: self.accept_threshold,
+                max_residual_force_ratio: self.max_residual_force_ratio,
+                max_foot_skating_m_s: self.max_foot_skating_m_s,
+                skating_at_most_input: self.skating_at_most_input,
+                min_flat_fraction: self.min_sole_flat_fraction,
+                ..correct::AcceptanceConfig::default()
+            },
             envs: self.envs,
             seed,
             ..correct::CorrectConfig::default()
@@ -362,6 +386,7 @@ impl Recipe {
             for (name, v) in [
                 ("target_r_norm", c.target_r_norm),
                 ("accept_threshold", c.accept_threshold),
+                ("min_sole_flat_fraction", c.min_sole_flat_fraction),
             ] {
                 if !(0.0..=1.0).contains(&v) {
                     return Err(err("[correct]", format!("`{name}` must be in [0, 1]")));

@@ -263,7 +263,12 @@ const CORRECTED: &str = r#"
     [correct]
     time_budget_s = 1
     target_r_norm = 0.0
+    # Plumbing, not physics: one second of training is accepted whatever it did.
     accept_threshold = 0.0
+    max_residual_force_ratio = 100.0
+    max_foot_skating_m_s = 100.0
+    skating_at_most_input = false
+    min_sole_flat_fraction = 0.0
     envs = 2
     [debias]
     hidden = [32]

@@ -1,7 +1,15 @@
 //! `motionaug bench physics --clip FILE [--json]`: simulation speed and
 //! action-0 tracking error on one clip, single thread.
+//!
+//! `motionaug bench correction --data DIR --classes a,b --per-class N --out DIR`:
+//! corrects N clips of each class (spread over the class) and writes the
+//! per-class table of acceptance, plausibility and wall time
+//! (`correct::summary`); finished clips are reused on a rerun.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
 
 use crate::input::ClipArgs;
 use crate::output::print_stdout;
@@ -25,24 +33,138 @@ enum What {
         seconds: f64,
         #[arg(long)]
         json: bool,
-        /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+        /// Keep the rest-pose foot boxes instead of building them in the standing
+        /// foot's frame (an ablation).
         #[arg(long)]
-        calibrate_feet: bool,
+        rest_feet: bool,
     },
+    /// Correct clips of each class and tabulate acceptance, plausibility and wall time.
+    Correction(CorrectionArgs),
+}
+
+#[derive(clap::Args)]
+struct CorrectionArgs {
+    /// Folder of HDM05 clips (`HDM_<actor>_<class>_<nnn>_120.amc` + `HDM_<actor>.asf`).
+    #[arg(long)]
+    data: PathBuf,
+    /// Classes (parts of class names).
+    #[arg(long, value_delimiter = ',', required = true)]
+    classes: Vec<String>,
+    /// Clips per class, spread evenly over the class's sorted clips.
+    #[arg(long, default_value_t = 3)]
+    per_class: usize,
+    /// Training wall-time budget per clip, seconds.
+    #[arg(long, default_value_t = 300.0)]
+    time_budget: f64,
+    /// PPO iterations per clip at most (a machine-independent budget).
+    #[arg(long)]
+    max_iterations: Option<u64>,
+    /// Rollout threads per clip.
+    #[arg(long, default_value_t = correct::CorrectConfig::default().ppo.threads)]
+    threads: usize,
+    /// Keep the rest-pose foot boxes (an ablation).
+    #[arg(long)]
+    rest_feet: bool,
+    /// PD-residual gains lowered to this fraction over `--residual-anneal-iterations`.
+    #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.final_scale)]
+    residual_final_scale: f32,
+    #[arg(long, default_value_t = correct::CorrectConfig::default().residual_schedule.over_iterations)]
+    residual_anneal_iterations: u64,
+    /// Output folder: one correction folder per clip, table.md, table.json.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// Corrects (or reuses) one clip into `dir`.
+fn correct_one(
+    path: &Path,
+    asf: &Path,
+    dir: &Path,
+    args: &CorrectionArgs,
+) -> anyhow::Result<correct::Report> {
+    let done = dir.join("report.json");
+    if done.is_file() {
+        let bytes =
+            std::fs::read(&done).with_context(|| format!("cannot read {}", done.display()))?;
+        return serde_json::from_slice(&bytes)
+            .with_context(|| format!("bad report {}", done.display()));
+    }
+    let motion = motion::io::load(
+        path,
+        &motion::io::LoadOptions {
+            skeleton: Some(asf.to_path_buf()),
+            ..Default::default()
+        },
+    )?;
+    let mut config = correct::CorrectConfig {
+        time_budget_s: args.time_budget,
+        max_iterations: args.max_iterations,
+        ..correct::CorrectConfig::default()
+    };
+    config.ppo.threads = args.threads;
+    config.physics.character.calibrate_feet = !args.rest_feet;
+    config.residual_schedule = correct::ResidualSchedule {
+        final_scale: args.residual_final_scale,
+        over_iterations: args.residual_anneal_iterations,
+    };
+    let resume = dir.join("checkpoints").is_dir();
+    let name = crate::input::clip_name(path);
+    Ok(correct::correct(&motion, &name, &config, dir, resume, |_| {})?.report)
+}
+
+fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let started = Instant::now();
+    let mut rows = Vec::new();
+    for class in &args.classes {
+        let clips = eval::dataset::find_clips(&args.data, class)?;
+        let n = args.per_class.min(clips.len());
+        let chosen: Vec<_> = (0..n).map(|i| &clips[i * clips.len() / n.max(1)]).collect();
+        let mut reports = Vec::new();
+        for (i, clip) in chosen.iter().enumerate() {
+            let asf = args.data.join(format!("HDM_{}.asf", clip.actor));
+            let t = Instant::now();
+            let r = correct_one(&clip.path, &asf, &args.out.join(&clip.name), &args)?;
+            eprintln!(
+                "{class} {}/{n} {}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
+                i + 1,
+                clip.name,
+                if r.accepted { "accepted" } else { "rejected" },
+                r.r_norm,
+                r.residual_force_ratio,
+                t.elapsed().as_secs_f64(),
+                if r.rejected_because.is_empty() {
+                    String::new()
+                } else {
+                    format!("\n    {}", r.rejected_because.join("\n    "))
+                }
+            );
+            reports.push(r);
+        }
+        rows.push(correct::summary::ClassSummary::of(class, &reports));
+        let md = correct::summary::to_markdown(&rows);
+        crate::output::write_atomic(&args.out.join("table.md"), md.as_bytes())?;
+        crate::output::write_json(&args.out.join("table.json"), &rows)?;
+    }
+    print_stdout(&correct::summary::to_markdown(&rows))?;
+    eprintln!("{:.0} s in all", started.elapsed().as_secs_f64());
+    Ok(())
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
+        What::Correction(a) => bench_correction(a),
         What::Physics {
             clip,
             input,
             seconds,
             json,
-            calibrate_feet,
+            rest_feet,
         } => {
             let motion = input.load(&clip)?;
             let mut config = physics::Config::default();
-            config.character.calibrate_feet = calibrate_feet;
+            config.character.calibrate_feet = !rest_feet;
             let report = physics::bench::bench_physics_for(&motion, &config, seconds)?;
             let text = if json {
                 serde_json::to_string_pretty(&report)? + "\n"

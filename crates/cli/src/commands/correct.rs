@@ -28,10 +28,21 @@ pub struct Args {
     /// Root force helping the character: pd (MotionAug), none, or learned (RFC).
     #[arg(long, default_value = "pd")]
     residual: Residual,
-    /// Stop early once the deterministic rollout reaches this R_norm (and is
-    /// accepted) [default: the library's, 0.8].
+    /// Stop early once the deterministic rollout reaches this R_norm (and
+    /// passes every acceptance criterion) [default: the library's, 0.8].
     #[arg(long)]
     target_r_norm: Option<f64>,
+    /// Accept only when the mean root residual force is at most this fraction
+    /// of body weight (the other acceptance limits are the library's; a recipe's
+    /// `[correct]` sets them all).
+    #[arg(long, default_value_t = CorrectConfig::default().acceptance.max_residual_force_ratio)]
+    max_residual_force_ratio: f64,
+    /// Lower the PD-residual gains linearly to this fraction of MotionAug's over
+    /// `--residual-anneal-iterations` PPO iterations (1 keeps them).
+    #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.final_scale)]
+    residual_final_scale: f32,
+    #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.over_iterations)]
+    residual_anneal_iterations: u64,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
@@ -47,9 +58,10 @@ pub struct Args {
     /// the source clip's for a synthesised variant of it.
     #[arg(long, value_name = "CHECKPOINTS")]
     warm_start: Option<PathBuf>,
-    /// Tilt the foot boxes flat in the clip's stance frames (an ablation; off by default).
+    /// Keep the rest-pose foot boxes instead of building them in the standing
+    /// foot's frame (an ablation).
     #[arg(long)]
-    calibrate_feet: bool,
+    rest_feet: bool,
     /// Write the corrected clip at the input's own height (the simulated floor
     /// at its median-frame foot level) instead of standing on y = 0; for data
     /// whose floor is not y = 0.
@@ -68,9 +80,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         ..defaults
     };
+    config.acceptance.max_residual_force_ratio = args.max_residual_force_ratio;
+    config.residual_schedule = correct::ResidualSchedule {
+        final_scale: args.residual_final_scale,
+        over_iterations: args.residual_anneal_iterations,
+    };
     config.physics.residual = args.residual;
     config.warm_start = args.warm_start.clone();
-    config.physics.character.calibrate_feet = args.calibrate_feet;
+    config.physics.character.calibrate_feet = !args.rest_feet;
     if args.keep_clip_height {
         config.physics.output_frame = physics::OutputFrame::Clip;
     }
@@ -104,11 +121,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let r = &outcome.report;
     eprintln!(
-        "R_norm {:.3} (action 0: {:.3}), mean reward {:.3}, residual force {:.3} m g, {} samples in {:.0} s: {}",
+        "R_norm {:.3} (action 0: {:.3}), {} samples in {:.0} s: {}",
         r.r_norm,
         r.r_norm_action0,
-        r.mean_reward,
-        r.residual_force_ratio,
         r.samples,
         r.wall_s,
         if r.accepted {
@@ -117,6 +132,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "not accepted"
         }
     );
+    for c in &r.criteria {
+        let op = if c.at_most { "<=" } else { ">=" };
+        eprintln!(
+            "  {} {:<15} {:8.3} {op} {:.3}  {}",
+            if c.passed { "pass" } else { "FAIL" },
+            c.name,
+            c.value,
+            c.limit,
+            c.meaning
+        );
+    }
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

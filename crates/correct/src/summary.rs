@@ -1,0 +1,122 @@
+//! The corrections of a class in one table: how many were accepted, which
+//! criterion rejected the others, what correction did to plausibility, and
+//! what it cost. Built from the reports alone, so a table can be made again
+//! from the `report.json` files of a finished run.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::report::Report;
+
+/// Mean of a plausibility figure before and after correction.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct BeforeAfter {
+    pub before: f64,
+    pub after: f64,
+}
+
+/// The corrections of one class.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ClassSummary {
+    pub class: String,
+    pub clips: usize,
+    pub accepted: usize,
+    /// Criterion name -> clips that passed it.
+    pub passed: BTreeMap<String, usize>,
+    pub mean_residual_force_ratio: f64,
+    pub mean_r_norm: f64,
+    pub foot_skating_m_s: BeforeAfter,
+    pub penetration_mean_m: BeforeAfter,
+    pub floating_fraction: BeforeAfter,
+    /// Mean fraction of planted foot frames standing on the sole (after only:
+    /// the input has no simulated feet).
+    pub sole_flat_fraction: f64,
+    /// Mean and total training wall time per clip, seconds.
+    pub mean_wall_s: f64,
+    pub total_wall_s: f64,
+    pub mean_samples: f64,
+}
+
+impl ClassSummary {
+    pub fn of(class: &str, reports: &[Report]) -> ClassSummary {
+        let n = reports.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&Report) -> f64| reports.iter().map(f).sum::<f64>() / n;
+        let both = |f: &dyn Fn(&motion::metrics::Plausibility) -> f64| BeforeAfter {
+            before: mean(&|r| f(&r.plausibility_before)),
+            after: mean(&|r| f(&r.plausibility_after)),
+        };
+        let mut passed = BTreeMap::new();
+        for r in reports {
+            for c in &r.criteria {
+                *passed.entry(c.name.clone()).or_insert(0) += usize::from(c.passed);
+            }
+        }
+        let criterion = |r: &Report, name: &str| {
+            r.criteria
+                .iter()
+                .find(|c| c.name == name)
+                .map_or(0.0, |c| c.value)
+        };
+        ClassSummary {
+            class: class.to_string(),
+            clips: reports.len(),
+            accepted: reports.iter().filter(|r| r.accepted).count(),
+            passed,
+            mean_residual_force_ratio: mean(&|r| r.residual_force_ratio),
+            mean_r_norm: mean(&|r| r.r_norm),
+            foot_skating_m_s: both(&|p| p.foot_skating_m_s),
+            penetration_mean_m: both(&|p| p.penetration_mean_m),
+            floating_fraction: both(&|p| p.floating_fraction),
+            sole_flat_fraction: mean(&|r| criterion(r, "soles_flat")),
+            mean_wall_s: mean(&|r| r.wall_s),
+            total_wall_s: reports.iter().map(|r| r.wall_s).sum(),
+            mean_samples: mean(&|r| r.samples as f64),
+        }
+    }
+}
+
+/// The criteria in report order.
+pub const CRITERIA: [&str; 5] = [
+    "no_fall",
+    "mean_reward",
+    "residual_force",
+    "foot_skating",
+    "soles_flat",
+];
+
+/// One row per class, as a Markdown table.
+pub fn to_markdown(rows: &[ClassSummary]) -> String {
+    let mut s = String::from(
+        "| class | clips | accepted | no fall | reward | residual | skating | soles | \
+         residual / m g | R_norm | skating m/s | penetration mm | floating % | soles flat % | \
+         wall s / clip | wall s total |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let passed: Vec<String> = CRITERIA
+            .iter()
+            .map(|c| format!("{}", r.passed.get(*c).copied().unwrap_or(0)))
+            .collect();
+        s += &format!(
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} -> {:.3} | {:.1} -> {:.1} | \
+             {:.0} -> {:.0} | {:.0} | {:.0} | {:.0} |\n",
+            r.class,
+            r.clips,
+            r.accepted,
+            passed.join(" | "),
+            r.mean_residual_force_ratio,
+            r.mean_r_norm,
+            r.foot_skating_m_s.before,
+            r.foot_skating_m_s.after,
+            r.penetration_mean_m.before * 1000.0,
+            r.penetration_mean_m.after * 1000.0,
+            r.floating_fraction.before * 100.0,
+            r.floating_fraction.after * 100.0,
+            r.sole_flat_fraction * 100.0,
+            r.mean_wall_s,
+            r.total_wall_s,
+        );
+    }
+    s
+}
