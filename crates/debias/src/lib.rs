@@ -14,8 +14,9 @@
 //!   back with leg IK, so debiasing does not bring back skating and floating,
 //!   and planted feet hanging above the floor (a sample tracked standing on its
 //!   heels) are pitched onto the sole height learnt from the training pairs.
-//! * [`model`]: the MLP (4 x 512 ReLU in the paper).
-//! * [`train`]: fitting the MLP on pairs; [`Debiaser`] applies, saves and loads it.
+//! * [`model`]: the MLP (4 x 512 ReLU in the paper), an `nn::Mlp`.
+//! * [`train`]: fitting the MLP on pairs (the `nn` crate's seeded initialisation
+//!   and AdamW); [`Debiaser`] applies, saves and loads it.
 
 pub mod contacts;
 pub mod features;
@@ -23,7 +24,7 @@ pub mod model;
 pub mod train;
 
 pub use contacts::{ContactConfig, ContactReport};
-pub use model::MlpConfig;
+pub use nn::MlpConfig;
 pub use train::{Debiaser, TrainConfig, TrainReport, train};
 
 #[derive(Debug, thiserror::Error)]
@@ -32,6 +33,8 @@ pub enum DebiasError {
     Candle(#[from] candle_core::Error),
     #[error(transparent)]
     Motion(#[from] motion::MotionError),
+    #[error(transparent)]
+    Nn(#[from] nn::NnError),
     #[error("{path}: {source}")]
     Io {
         path: std::path::PathBuf,

@@ -12,8 +12,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use candle_core::{DType, Device, Tensor};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
+use candle_core::{Device, Tensor};
 use motion::Motion;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -24,8 +23,9 @@ use crate::contacts::{self, ContactConfig, ContactReport};
 use crate::features::{
     apply_rotations, input_dim, inputs, output_dim, rotations_of, state_dim, states,
 };
-use crate::model::{Mlp, MlpConfig};
+use crate::model;
 use crate::{DebiasError, Result};
+use nn::{AdamConfig, Mlp, MlpConfig, Optimizer, Params};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -162,7 +162,7 @@ const META: &str = "debias.json";
 /// A trained debiasing network with its standardisation.
 pub struct Debiaser {
     meta: Meta,
-    vars: VarMap,
+    params: Params,
     mlp: Mlp,
 }
 
@@ -227,21 +227,14 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     let x = Tensor::from_vec(input.apply(&x_rows), (frames, id), &Device::Cpu)?;
     let y = Tensor::from_vec(output.apply(&y_rows), (frames, od), &Device::Cpu)?;
 
-    let mlp_config = MlpConfig {
-        input: id,
-        hidden: config.hidden.clone(),
-        output: od,
+    let mlp_config = MlpConfig::new(id, &config.hidden, od);
+    let params = Params::new(config.seed);
+    let mlp = model::build(&mlp_config, &params)?;
+    let adam = AdamConfig {
+        weight_decay: config.weight_decay,
+        ..AdamConfig::new(config.learning_rate)
     };
-    let vars = VarMap::new();
-    let mlp = Mlp::seeded(&mlp_config, &vars, config.seed)?;
-    let mut opt = AdamW::new(
-        vars.all_vars(),
-        ParamsAdamW {
-            lr: config.learning_rate,
-            weight_decay: config.weight_decay,
-            ..Default::default()
-        },
-    )?;
+    let mut opt = Optimizer::new(params.vars(), adam, None);
     // Loss of "no correction" in standardised target units: the zero change.
     let zero = output.apply(&vec![0.0; od]);
     let zero = Tensor::from_vec(zero, (1, od), &Device::Cpu)?;
@@ -264,7 +257,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         cursor += batch;
         let pred = mlp.forward(&x.index_select(&idx, 0)?)?;
         let loss = pred.sub(&y.index_select(&idx, 0)?)?.sqr()?.mean_all()?;
-        opt.backward_step(&loss)?;
+        opt.step(&loss.backward()?)?;
         if it % 500 == 0 {
             tracing::debug!(it, loss = loss.to_scalar::<f32>()?, "debias step");
         }
@@ -298,7 +291,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         output,
         report: report.clone(),
     };
-    Ok((Debiaser { meta, vars, mlp }, report))
+    Ok((Debiaser { meta, params, mlp }, report))
 }
 
 impl Debiaser {
@@ -365,7 +358,7 @@ impl Debiaser {
             message: e.to_string(),
         })?;
         let tmp = dir.join(format!("{WEIGHTS}.tmp"));
-        self.vars.save(&tmp)?;
+        self.params.save(&tmp)?;
         std::fs::rename(&tmp, dir.join(WEIGHTS)).map_err(io(&dir.join(WEIGHTS)))?;
         motion::io::write_atomic(&dir.join(META), &meta)?;
         Ok(())
@@ -388,17 +381,17 @@ impl Debiaser {
                 message: format!("format {} (this build reads {FORMAT})", meta.format),
             });
         }
-        let mut vars = VarMap::new();
-        let mlp = Mlp::new(
-            &meta.mlp,
-            VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu),
-        )?;
+        let params = Params::new(0);
+        let mlp = model::build(&meta.mlp, &params).map_err(|e| DebiasError::Model {
+            path: meta_path.clone(),
+            message: e.to_string(),
+        })?;
         let weights = dir.join(WEIGHTS);
-        vars.load(&weights).map_err(|e| DebiasError::Model {
+        params.load(&weights).map_err(|e| DebiasError::Model {
             path: weights,
             message: e.to_string(),
         })?;
-        Ok(Debiaser { meta, vars, mlp })
+        Ok(Debiaser { meta, params, mlp })
     }
 }
 

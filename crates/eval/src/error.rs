@@ -9,6 +9,9 @@ pub enum EvalError {
     #[error(transparent)]
     Motion(#[from] motion::MotionError),
     #[error(transparent)]
+    Nn(#[from] nn::NnError),
+    /// The table's VAE set (training, caching, sampling).
+    #[error(transparent)]
     Vae(#[from] vae::VaeError),
     #[error("{path}: {source}")]
     Io {

@@ -10,6 +10,8 @@ pub enum ModelError {
     Interaction(#[from] interaction::InteractionError),
     #[error(transparent)]
     Motion(#[from] motion::MotionError),
+    #[error(transparent)]
+    Nn(#[from] nn::NnError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,

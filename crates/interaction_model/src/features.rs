@@ -16,8 +16,9 @@
 //! eigendecompositions for the matrix square roots.
 
 use candle_core::{Device, Tensor};
-use candle_nn::{AdamW, Linear, Module, Optimizer, ParamsAdamW, VarBuilder, VarMap};
+use candle_nn::{Linear, Module, VarBuilder};
 use nalgebra::{DMatrix, DVector};
+use nn::{AdamConfig, Optimizer, Params};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -25,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::{Dataset, Sample};
 use crate::error::{ModelError, Result};
-use crate::nn::{cat, new_varmap, seeded_init};
+use crate::graph::cat;
 use crate::stgcn::{StGcn, StGcnConfig};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -65,7 +66,8 @@ pub struct FeatureQuality {
 }
 
 pub struct FeatureNet {
-    pub varmap: VarMap,
+    /// The parameters (seeded, `nn`'s scheme).
+    pub params: Params,
     encoder: StGcn,
     project: Linear,
     class_head: Linear,
@@ -86,10 +88,12 @@ pub fn joint_graph(parents_a: &[i32], parents_b: &[i32]) -> Vec<i32> {
 }
 
 impl FeatureNet {
-    pub fn new(vb: VarBuilder, config: &FeatureConfig, parents: &[i32]) -> Result<Self> {
+    /// A fresh network, its parameters drawn into `params`.
+    pub fn new(params: &Params, config: &FeatureConfig, parents: &[i32]) -> Result<Self> {
         let e = config.encoder.out_dim();
+        let vb: VarBuilder = params.var_builder();
         Ok(FeatureNet {
-            varmap: VarMap::new(),
+            params: params.clone(),
             encoder: StGcn::new(vb.pp("stgcn"), &config.encoder, parents)?,
             project: candle_nn::linear(e, config.dim, vb.pp("project"))?,
             class_head: candle_nn::linear(config.dim, config.classes, vb.pp("class"))?,
@@ -123,10 +127,7 @@ impl FeatureNet {
         }
         let first = &dataset.pairs[0];
         let parents = joint_graph(&first.body_a.parents, &first.body_b.parents);
-        let (varmap, vb) = new_varmap();
-        let mut net = FeatureNet::new(vb, config, &parents)?;
-        seeded_init(&varmap, config.seed)?;
-        net.varmap = varmap;
+        let mut net = FeatureNet::new(&Params::new(config.seed), config, &parents)?;
         let globals: Vec<f32> = train
             .iter()
             .map(|s| dataset.pairs[s.pair].variations[s.variation].global as f32)
@@ -136,14 +137,11 @@ impl FeatureNet {
             .sqrt()
             .max(1e-3);
         net.scale_stats = (m, sd);
-        let mut opt = AdamW::new(
-            net.varmap.all_vars(),
-            ParamsAdamW {
-                lr: config.lr,
-                weight_decay: 1e-4,
-                ..Default::default()
-            },
-        )?;
+        let adam = AdamConfig {
+            weight_decay: 1e-4,
+            ..AdamConfig::new(config.lr)
+        };
+        let mut opt = Optimizer::new(net.params.vars(), adam, None);
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0xFEA7);
         let mut order: Vec<usize> = (0..train.len()).collect();
         let mut cursor = order.len();
@@ -158,7 +156,7 @@ impl FeatureNet {
                 cursor += 1;
             }
             let loss = net.loss(dataset, &picked, window)?;
-            opt.backward_step(&loss)?;
+            opt.step(&loss.backward()?)?;
         }
         let mut q = FeatureQuality {
             train_windows: train.len(),

@@ -24,7 +24,7 @@ use candle_nn::{Linear, Module, VarBuilder};
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
-use crate::nn::{adjacency_tensor, graph_mix};
+use crate::graph::{adjacency_tensor, graph_mix};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GGruConfig {
@@ -167,12 +167,12 @@ impl GGruDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::{new_varmap, seeded_init};
     use candle_core::{DType, Device};
 
     #[test]
     fn unroll_shapes_and_bounded_state() {
-        let (vm, vb) = new_varmap();
+        let params = nn::Params::new(2);
+        let vb = params.var_builder();
         let cfg = GGruConfig {
             input: 2,
             node: 4,
@@ -182,7 +182,6 @@ mod tests {
         };
         let dec = GGruDecoder::new(vb.pp("d"), &cfg, &[-1, 0, 0]).unwrap();
         let cell = GGruCell::new(vb.pp("c"), 5, 6, &[-1, 0, 0]).unwrap();
-        seeded_init(&vm, 2).unwrap();
         let h0 = Tensor::zeros((4, 3, 6), DType::F32, &Device::Cpu).unwrap();
         let data = (Tensor::ones((4, 7, 3, 2), DType::F32, &Device::Cpu).unwrap() * 100.0).unwrap();
         let node = Tensor::ones((4, 3, 4), DType::F32, &Device::Cpu).unwrap();

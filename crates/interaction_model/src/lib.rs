@@ -8,6 +8,8 @@
 //! adaptation network for A ([`adapt_net`]). They learn from variations made
 //! by the interaction optimiser ([`dataset`], cached on disk), are trained
 //! together ([`train`]) and saved with their configuration ([`model`]).
+//! The layers, seeded initialisation, optimiser and KL are the `nn` crate's;
+//! [`graph`] holds the skeleton-graph helpers.
 //! [`generate`] turns predictions into clips; [`variations`] is the one entry
 //! point that makes variations of a pair by either method; [`eval`] measures
 //! E_r, E_b, JPD and FID (with the feature network of [`features`]) on the
@@ -20,8 +22,8 @@ pub mod eval;
 pub mod features;
 pub mod generate;
 pub mod ggru;
+pub mod graph;
 pub mod model;
-pub mod nn;
 pub mod prior;
 pub mod retarget_net;
 pub mod stgcn;

@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use candle_core::{DType, Device, Tensor};
-use candle_nn::VarMap;
+use nn::{Params, normal};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -19,7 +19,6 @@ use serde::{Deserialize, Serialize};
 use crate::adapt_net::{AdaptNet, AdaptNetConfig};
 use crate::dataset::{Body, Canon, cut, window_starts, write_json};
 use crate::error::{ModelError, Result};
-use crate::nn::{new_varmap, normal, seeded_init};
 use crate::prior::{PriorConfig, SkeletonPrior};
 use crate::retarget_net::{RetargetNet, RetargetNetConfig};
 use crate::train::{Losses, TrainConfig, parent_index};
@@ -85,7 +84,8 @@ pub struct ModelMeta {
 }
 
 pub struct InteractionModel {
-    pub varmap: VarMap,
+    /// Every network's parameters, seeded (`nn`'s scheme, in registration order).
+    pub params: Params,
     pub prior: SkeletonPrior,
     pub retarget: RetargetNet,
     pub adapt: AdaptNet,
@@ -103,7 +103,8 @@ pub struct ClipPrediction {
 impl InteractionModel {
     /// Fresh networks (seeded initialisation) for `meta`.
     pub fn new(meta: ModelMeta, seed: u64) -> Result<Self> {
-        let (varmap, vb) = new_varmap();
+        let params = Params::new(seed);
+        let vb = params.var_builder();
         let c = &meta.config;
         if meta.body_a.len() != c.adapt.nodes_a
             || meta.body_b.len() != c.retarget.nodes
@@ -122,11 +123,10 @@ impl InteractionModel {
             &meta.body_a.parents,
             &meta.body_b.parents,
         )?;
-        seeded_init(&varmap, seed)?;
         Ok(InteractionModel {
             parents_a: parent_index(&meta.body_a.parents)?,
             parents_b: parent_index(&meta.body_b.parents)?,
-            varmap,
+            params,
             prior,
             retarget,
             adapt,
@@ -135,7 +135,7 @@ impl InteractionModel {
     }
 
     pub fn parameter_count(&self) -> usize {
-        self.varmap.all_vars().iter().map(|v| v.elem_count()).sum()
+        self.params.count()
     }
 
     /// Write `weights.safetensors` and `model.json` into `dir`.
@@ -143,7 +143,7 @@ impl InteractionModel {
         std::fs::create_dir_all(dir).map_err(|e| ModelError::io(dir, e))?;
         let weights = dir.join(WEIGHTS_FILE);
         let tmp = dir.join(format!("{WEIGHTS_FILE}.tmp"));
-        self.varmap.save(&tmp)?;
+        self.params.save(&tmp)?;
         std::fs::rename(&tmp, &weights).map_err(|e| ModelError::io(&weights, e))?;
         write_json(&dir.join(META_FILE), &self.meta)
     }
@@ -162,7 +162,7 @@ impl InteractionModel {
                 meta.format
             )));
         }
-        let mut model = InteractionModel::new(meta, 0)?;
+        let model = InteractionModel::new(meta, 0)?;
         let weights = dir.join(WEIGHTS_FILE);
         if !weights.is_file() {
             return Err(ModelError::io(
@@ -170,7 +170,7 @@ impl InteractionModel {
                 std::io::Error::new(std::io::ErrorKind::NotFound, "missing"),
             ));
         }
-        model.varmap.load(&weights)?;
+        model.params.load(&weights)?;
         Ok(model)
     }
 

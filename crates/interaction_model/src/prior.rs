@@ -13,7 +13,7 @@ use candle_nn::{Linear, Module, VarBuilder};
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
-use crate::nn::{Mlp, kl_normal, reparameterise};
+use nn::{Mlp, MlpConfig, kl_sum, reparameterise};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PriorConfig {
@@ -56,11 +56,14 @@ impl SkeletonPrior {
         let (body, _) = config
             .hidden
             .split_at(config.hidden.len().saturating_sub(1));
-        let encoder = Mlp::new(vb.pp("mlp1"), config.dim, body, last)?;
+        let encoder = Mlp::from_vb(&MlpConfig::new(config.dim, body, last), vb.pp("mlp1"))?;
         let mu = candle_nn::linear(last, config.latent, vb.pp("mu"))?;
         let logvar = candle_nn::linear(last, config.latent, vb.pp("logvar"))?;
         let reversed: Vec<usize> = config.hidden.iter().rev().copied().collect();
-        let decoder = Mlp::new(vb.pp("mlp2"), config.latent, &reversed, config.dim)?;
+        let decoder = Mlp::from_vb(
+            &MlpConfig::new(config.latent, &reversed, config.dim),
+            vb.pp("mlp2"),
+        )?;
         Ok(SkeletonPrior {
             config: config.clone(),
             encoder,
@@ -87,21 +90,20 @@ impl SkeletonPrior {
     pub fn loss(&self, bs: &Tensor, out: &PriorOutput) -> Result<Tensor> {
         let n = bs.dim(0)? as f64;
         let rec = ((&out.reconstruction - bs)?.sqr()?.sum_all()? / n)?;
-        Ok((rec + kl_normal(&out.mu, &out.logvar)?)?)
+        Ok((rec + kl_sum(&out.mu, &out.logvar)?)?)
     }
 
     /// Decode latent codes `[n, latent]` into standardised scales `[n, dim]`.
     pub fn decode(&self, z: &Tensor) -> Result<Tensor> {
-        self.decoder.forward(z)
+        Ok(self.decoder.forward(z)?)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::{new_varmap, normal, seeded_init};
     use candle_core::Device;
-    use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+    use nn::{AdamConfig, Optimizer, Params, normal};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -110,24 +112,16 @@ mod tests {
     /// the correlation: it learned the distribution, not just the mean.
     #[test]
     fn prior_samples_follow_the_data() {
-        let (vm, vb) = new_varmap();
+        let params = Params::new(1);
+        let vb = params.var_builder();
         let cfg = PriorConfig {
             dim: 2,
             hidden: vec![16, 32],
             latent: 2,
         };
         let prior = SkeletonPrior::new(vb, &cfg).unwrap();
-        seeded_init(&vm, 1).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let mut opt = AdamW::new(
-            vm.all_vars(),
-            ParamsAdamW {
-                lr: 3e-3,
-                weight_decay: 0.0,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut opt = Optimizer::new(params.vars(), AdamConfig::new(3e-3), None);
         let (mut first, mut last) = (0.0, 0.0);
         for step in 0..600 {
             let rows: Vec<f32> = (0..32)
@@ -145,7 +139,7 @@ mod tests {
                 first = v;
             }
             last = v;
-            opt.backward_step(&loss).unwrap();
+            opt.step(&loss.backward().unwrap()).unwrap();
         }
         assert!(last < 0.8 * first, "loss {first} -> {last}");
         let z = normal(&[400, 2], &mut rng).unwrap();

@@ -21,9 +21,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 use crate::ggru::{GGruConfig, GGruDecoder};
-use crate::nn::cat;
-use crate::nn::reparameterise;
+use crate::graph::cat;
 use crate::stgcn::{StGcn, StGcnConfig};
+use nn::reparameterise;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RetargetNetConfig {

@@ -14,8 +14,7 @@ use candle_nn::{Linear, Module, VarBuilder};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ModelError, Result};
-use crate::nn::cat;
-use crate::nn::{adjacency_tensor, graph_mix};
+use crate::graph::{adjacency_tensor, cat, graph_mix};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StGcnConfig {
@@ -141,14 +140,12 @@ impl StGcn {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::{new_varmap, seeded_init};
 
     #[test]
     fn shapes_and_strides() {
-        let (vm, vb) = new_varmap();
+        let params = nn::Params::new(1);
         let cfg = StGcnConfig::new(3, &[8, 16, 16]);
-        let net = StGcn::new(vb, &cfg, &[-1, 0, 1, 0]).unwrap();
-        seeded_init(&vm, 1).unwrap();
+        let net = StGcn::new(params.var_builder(), &cfg, &[-1, 0, 1, 0]).unwrap();
         let x = Tensor::ones((2, 9, 4, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
         assert_eq!(net.features(&x).unwrap().dims(), &[2, 3, 4, 16]);
         assert_eq!(net.forward(&x).unwrap().dims(), &[2, 16]);

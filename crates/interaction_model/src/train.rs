@@ -10,13 +10,13 @@
 //! L1 terms are means over coordinates (metres), the bone-length term `BL`
 //! (Eq. 7) is the squared bone-length difference summed over bones and
 //! averaged over frames and samples, KL is summed over latent dimensions.
-//! One AdamW (candle-nn) over every parameter; batches are drawn from the
+//! One AdamW (the `nn` optimiser) over every parameter; batches are drawn from the
 //! training windows by a seeded generator, so a run is reproducible.
 
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use nn::{AdamConfig, Optimizer, kl_sum, normal};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -25,7 +25,6 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::{Batch, Dataset, Sample};
 use crate::error::{ModelError, Result};
 use crate::model::{InteractionModel, ModelConfig, ModelMeta, PriorStats, TrainingSummary};
-use crate::nn::{kl_normal, normal};
 
 /// The paper's loss weights (Sec. 3.3).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -192,7 +191,7 @@ pub fn losses(
         .forward(&delta_b, &batch.template_b, &batch.scales, &eps)?;
     let pred_b = (&batch.template_b + &rb.delta)?;
     let (lb, pos_b) = motion_loss(&pred_b, &batch.b, &model.parents_b, w)?;
-    let l_b = (lb + kl_normal(&rb.mu, &rb.logvar)?.affine(w.kl, 0.0)?)?;
+    let l_b = (lb + kl_sum(&rb.mu, &rb.logvar)?.affine(w.kl, 0.0)?)?;
     // L_AM (true B as the condition).
     let delta_a = (&batch.a - &batch.template_a)?;
     let eps = normal(&[n, m.config.adapt.latent], rng)?;
@@ -205,7 +204,7 @@ pub fn losses(
     )?;
     let pred_a = (&batch.template_a + &ra.delta)?;
     let (la, pos_a) = motion_loss(&pred_a, &batch.a, &model.parents_a, w)?;
-    let l_a = (la + kl_normal(&ra.mu, &ra.logvar)?.affine(w.kl, 0.0)?)?;
+    let l_a = (la + kl_sum(&ra.mu, &ra.logvar)?.affine(w.kl, 0.0)?)?;
     let total = ((&l_prior + &l_b)? + &l_a)?;
     let s = |t: &Tensor| -> Result<f64> { Ok(t.to_scalar::<f32>()? as f64) };
     let values = Losses {
@@ -292,14 +291,11 @@ fn train_here(
         },
     };
     let mut model = InteractionModel::new(meta, config.seed)?;
-    let mut opt = AdamW::new(
-        model.varmap.all_vars(),
-        ParamsAdamW {
-            lr: config.lr,
-            weight_decay: config.weight_decay,
-            ..Default::default()
-        },
-    )?;
+    let adam = AdamConfig {
+        weight_decay: config.weight_decay,
+        ..AdamConfig::new(config.lr)
+    };
+    let mut opt = Optimizer::new(model.params.vars(), adam, None);
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x5EED);
     let mut order: Vec<usize> = (0..samples.len()).collect();
     let mut cursor = order.len();
@@ -309,9 +305,7 @@ fn train_here(
     for step in 0..config.steps {
         // Cosine decay to a tenth of the rate.
         let frac = step as f64 / config.steps.max(1) as f64;
-        opt.set_learning_rate(
-            config.lr * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * frac).cos())),
-        );
+        opt.set_lr(config.lr * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * frac).cos())));
         let mut picked = Vec::with_capacity(config.batch);
         while picked.len() < config.batch.min(samples.len()) {
             if cursor == order.len() {
@@ -329,7 +323,7 @@ fn train_here(
                 values.total
             )));
         }
-        opt.backward_step(&loss)?;
+        opt.step(&loss.backward()?)?;
         last = values;
         if step % 10 == 0 || step + 1 == config.steps {
             curve.push((step, values.total));

@@ -15,7 +15,6 @@ use ppo::{
     Env, EnvRng, GaussianPolicy, PolicyConfig, PpoConfig, RunLimits, StepResult, Trainer,
     ValueConfig, ValueNet,
 };
-use rand::SeedableRng;
 
 const OBS: usize = 250;
 const ACT: usize = 45;
@@ -82,18 +81,18 @@ fn main() {
         candle_core::utils::get_num_threads()
     );
     for hidden in [vec![1024, 512], vec![256, 256]] {
-        let mut rng = EnvRng::seed_from_u64(0);
+        let params = nn::Params::new(0);
         let pcfg = PolicyConfig {
             hidden: hidden.clone(),
             ..PolicyConfig::default()
         };
-        let policy = GaussianPolicy::new(&pcfg, OBS, ACT, &mut rng).unwrap();
+        let policy = GaussianPolicy::new(&pcfg, OBS, ACT, &params).unwrap();
         let value = ValueNet::new(
             &ValueConfig {
                 hidden: hidden.clone(),
             },
             OBS,
-            &mut rng,
+            &params,
         )
         .unwrap();
         println!("\nnets {hidden:?} (obs {OBS}, act {ACT}): policy + value forward");

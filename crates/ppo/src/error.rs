@@ -6,6 +6,8 @@ use std::path::PathBuf;
 pub enum PpoError {
     #[error("tensor operation failed: {0}")]
     Candle(#[from] candle_core::Error),
+    #[error(transparent)]
+    Nn(#[from] nn::NnError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,

@@ -3,12 +3,11 @@
 //! learnable). The last layer starts near zero so the untrained policy's mean action is
 //! about 0, which for residual-action environments means "track the reference".
 
-use candle_core::{Device, Tensor, Var};
+use candle_core::{Tensor, Var};
+use nn::{Mlp, MlpConfig, MlpInit, Params};
 use serde::{Deserialize, Serialize};
 
-use crate::env::EnvRng;
 use crate::error::Result;
-use crate::mlp::Mlp;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PolicyConfig {
@@ -36,6 +35,8 @@ pub struct GaussianPolicy {
     /// Shape `[act_dim]`; a `Var` only when learnable.
     log_std: LogStd,
     act_dim: usize,
+    /// `policy.mean.<layer>.weight|bias` (and `policy.log_std` when learned).
+    vars: Vec<(String, Var)>,
 }
 
 enum LogStd {
@@ -46,36 +47,40 @@ enum LogStd {
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
 
 impl GaussianPolicy {
-    pub fn new(
-        cfg: &PolicyConfig,
-        obs_dim: usize,
-        act_dim: usize,
-        rng: &mut EnvRng,
-    ) -> Result<Self> {
-        let mean_net = Mlp::new(
-            "policy.mean",
-            obs_dim,
-            &cfg.hidden,
-            act_dim,
-            cfg.init_output_scale,
-            rng,
-        )?;
-        let init = Tensor::from_vec(vec![cfg.log_std; act_dim], act_dim, &Device::Cpu)?;
+    /// Registers its parameters in `p` under `policy.` (the store must not hold
+    /// other `policy.` names).
+    pub fn new(cfg: &PolicyConfig, obs_dim: usize, act_dim: usize, p: &Params) -> Result<Self> {
+        let mlp = MlpConfig {
+            init: MlpInit::ScaledOutput {
+                scale: cfg.init_output_scale,
+            },
+            ..MlpConfig::new(obs_dim, &cfg.hidden, act_dim)
+        };
+        let mean_net = Mlp::new(&mlp, p, "policy.mean")?;
         let log_std = if cfg.learn_log_std {
-            LogStd::Learned(Var::from_tensor(&init)?)
+            p.constant("policy.log_std", &[act_dim], cfg.log_std)?;
+            let var = p
+                .get("policy.log_std")
+                .ok_or_else(|| crate::PpoError::Config("policy.log_std not registered".into()))?;
+            LogStd::Learned(var)
         } else {
-            LogStd::Fixed(init)
+            LogStd::Fixed(Tensor::from_vec(
+                vec![cfg.log_std; act_dim],
+                act_dim,
+                &candle_core::Device::Cpu,
+            )?)
         };
         Ok(GaussianPolicy {
             mean_net,
             log_std,
             act_dim,
+            vars: p.with_prefix(&["policy."]),
         })
     }
 
     /// Mean action `[batch, act_dim]` for normalised observations `[batch, obs_dim]`.
     pub fn forward(&self, obs: &Tensor) -> Result<Tensor> {
-        self.mean_net.forward(obs)
+        Ok(self.mean_net.forward(obs)?)
     }
 
     pub fn log_std(&self) -> &Tensor {
@@ -109,10 +114,6 @@ impl GaussianPolicy {
 
     /// All trainable parameters with stable names.
     pub fn vars(&self) -> Vec<(String, Var)> {
-        let mut v = self.mean_net.vars().to_vec();
-        if let LogStd::Learned(ls) = &self.log_std {
-            v.push(("policy.log_std".to_string(), ls.clone()));
-        }
-        v
+        self.vars.clone()
     }
 }

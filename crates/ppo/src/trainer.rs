@@ -13,7 +13,8 @@ use rand::{RngCore, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::adam::{Adam, AdamConfig};
+use nn::{AdamConfig, Optimizer, Params};
+
 use crate::checkpoint::{self, CheckpointMeta};
 use crate::config::PpoConfig;
 use crate::env::{Env, EnvRng};
@@ -137,8 +138,8 @@ pub struct Trainer<E: Env> {
     act_dim: usize,
     policy: GaussianPolicy,
     value: ValueNet,
-    policy_opt: Adam,
-    value_opt: Adam,
+    policy_opt: Optimizer,
+    value_opt: Optimizer,
     norm: RunningNorm,
     rng: EnvRng,
     progress: Progress,
@@ -179,15 +180,14 @@ impl<E: Env> Trainer<E> {
                 });
             }
         }
-        let mut rng = EnvRng::seed_from_u64(seed);
-        let policy = GaussianPolicy::new(&config.policy, obs_dim, act_dim, &mut rng)?;
-        let value = ValueNet::new(&config.value, obs_dim, &mut rng)?;
-        let opt = |lr: f64| AdamConfig {
-            max_grad_norm: config.max_grad_norm,
-            ..AdamConfig::new(lr)
-        };
-        let policy_opt = Adam::new(policy.vars(), opt(config.policy_lr));
-        let value_opt = Adam::new(value.vars(), opt(config.value_lr));
+        // One generator: the networks' initial weights first, then rollouts.
+        let params = Params::from_rng(EnvRng::seed_from_u64(seed));
+        let policy = GaussianPolicy::new(&config.policy, obs_dim, act_dim, &params)?;
+        let value = ValueNet::new(&config.value, obs_dim, &params)?;
+        let rng = params.rng()?;
+        let opt = |vars, lr| Optimizer::new(vars, AdamConfig::new(lr), config.max_grad_norm);
+        let policy_opt = opt(policy.vars(), config.policy_lr);
+        let value_opt = opt(value.vars(), config.value_lr);
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(config.threads)
             .thread_name(|i| format!("ppo-rollout-{i}"))

@@ -1,11 +1,10 @@
 //! The critic: an MLP from the normalised observation to the state value.
 
 use candle_core::{Tensor, Var};
+use nn::{Mlp, MlpConfig, MlpInit, Params};
 use serde::{Deserialize, Serialize};
 
-use crate::env::EnvRng;
 use crate::error::Result;
-use crate::mlp::Mlp;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValueConfig {
@@ -22,12 +21,21 @@ impl Default for ValueConfig {
 
 pub struct ValueNet {
     net: Mlp,
+    /// `value.<layer>.weight|bias`.
+    vars: Vec<(String, Var)>,
 }
 
 impl ValueNet {
-    pub fn new(cfg: &ValueConfig, obs_dim: usize, rng: &mut EnvRng) -> Result<Self> {
+    /// Registers its parameters in `p` under `value.` (the store must not hold
+    /// other `value.` names).
+    pub fn new(cfg: &ValueConfig, obs_dim: usize, p: &Params) -> Result<Self> {
+        let mlp = MlpConfig {
+            init: MlpInit::ScaledOutput { scale: 1.0 },
+            ..MlpConfig::new(obs_dim, &cfg.hidden, 1)
+        };
         Ok(ValueNet {
-            net: Mlp::new("value", obs_dim, &cfg.hidden, 1, 1.0, rng)?,
+            net: Mlp::new(&mlp, p, "value")?,
+            vars: p.with_prefix(&["value."]),
         })
     }
 
@@ -37,6 +45,6 @@ impl ValueNet {
     }
 
     pub fn vars(&self) -> Vec<(String, Var)> {
-        self.net.vars().to_vec()
+        self.vars.clone()
     }
 }

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use candle_core::{DType, Device, Tensor};
+use nn::Params;
 use vae::lstm::{Direction, Lstm};
-use vae::params::Params;
 use vae::{OptimizerConfig, TrainConfig, Trainer, VaeConfig};
 
 fn kick_clips() -> Vec<motion::Motion> {
@@ -42,8 +42,8 @@ fn time_steps(name: &str, clips: &[motion::Motion], config: &TrainConfig, steps:
 }
 
 fn time_lstm(b: usize, t: usize, i: usize, h: usize, reps: usize) {
-    let mut p = Params::new(1);
-    let lstm = Lstm::new(&mut p, "l", i, h).expect("lstm");
+    let p = Params::new(1);
+    let lstm = Lstm::new(&p, "l", i, h).expect("lstm");
     let x = p.uniform("x", &[b, t, i], 1.0).expect("x");
     let mask = Tensor::ones((b, t), DType::F32, &Device::Cpu).expect("mask");
     let run = |naive: bool| {

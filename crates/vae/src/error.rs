@@ -8,6 +8,8 @@ pub enum VaeError {
     Candle(#[from] candle_core::Error),
     #[error(transparent)]
     Motion(#[from] motion::MotionError),
+    #[error(transparent)]
+    Nn(#[from] nn::NnError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,

@@ -7,8 +7,10 @@
 //! * [`features`]: motion <-> per-frame vectors (root position + 6D rotations),
 //!   reusable by debiasing and evaluation code.
 //! * [`lstm`]: LSTM / BiLSTM with one fused input projection per sequence.
-//! * [`model`]: encoder, decoder, frame and sequence discriminators.
-//! * [`loss`], [`optim`], [`train`]: losses, SGD/Adam, the training loop.
+//! * [`model`]: encoder, decoder, frame and sequence discriminators, built from
+//!   the `nn` crate's seeded parameters, Linear, MLP and LayerNorm.
+//! * [`loss`], [`train`]: losses and the training loop (the `nn` crate's
+//!   SGD/Adam optimiser and KL term).
 //! * [`latent`]: PCA + k-means clustering of training posteriors, near sampling.
 //! * [`trained`]: a trained model: encode, decode, sample, save, load.
 
@@ -19,10 +21,7 @@ pub mod latent;
 pub mod loss;
 pub mod lstm;
 pub mod model;
-pub mod nn;
 pub mod normalize;
-pub mod optim;
-pub mod params;
 pub mod train;
 pub mod trained;
 
@@ -30,6 +29,6 @@ pub use error::{Result, VaeError};
 pub use features::FeatureConfig;
 pub use latent::{NearConfig, Prior};
 pub use model::VaeConfig;
-pub use optim::OptimizerConfig;
+pub use nn::OptimizerConfig;
 pub use train::{Losses, Progress, TrainConfig, Trainer, train};
 pub use trained::{ReconstructionError, Sample, TrainedVae};

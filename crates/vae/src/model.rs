@@ -15,8 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
 use crate::lstm::{BiLstm, Direction, Lstm, masked_mean};
-use crate::nn::{LayerNorm, Linear, Mlp};
-use crate::params::Params;
+use nn::{LayerNorm, Linear, Mlp, MlpConfig, Params};
 
 /// Layer sizes. [`VaeConfig::reference`] is the paper's; the default is small enough
 /// to train a class in minutes on two CPU cores.
@@ -155,7 +154,7 @@ impl Decoder {
             .contiguous()?;
         let mask = Tensor::ones((b, frames), z.dtype(), z.device())?;
         let h = self.lstm.forward(&seq, &mask, Direction::Forward)?;
-        self.out.forward(&h)
+        Ok(self.out.forward(&h)?)
     }
 }
 
@@ -204,37 +203,41 @@ impl Vae {
             return Err(VaeError::Config("frame dimension is 0".into()));
         }
         let c = config;
-        let mut p = Params::new(seed);
+        let p = Params::new(seed);
         let encoder = Encoder {
-            norm: LayerNorm::new(&mut p, "enc.norm", frame_dim)?,
-            input: Linear::new(&mut p, "enc.input", frame_dim, c.enc_input)?,
-            lstm: BiLstm::new(&mut p, "enc.lstm", c.enc_input, c.enc_hidden)?,
-            mu: Mlp::new(&mut p, "enc.mu", 2 * c.enc_hidden, &c.head_hidden, c.latent)?,
+            norm: LayerNorm::new(&p, "enc.norm", frame_dim)?,
+            input: Linear::new(&p, "enc.input", frame_dim, c.enc_input)?,
+            lstm: BiLstm::new(&p, "enc.lstm", c.enc_input, c.enc_hidden)?,
+            mu: Mlp::new(
+                &MlpConfig::new(2 * c.enc_hidden, &c.head_hidden, c.latent),
+                &p,
+                "enc.mu",
+            )?,
             logvar: Mlp::new(
-                &mut p,
+                &MlpConfig::new(2 * c.enc_hidden, &c.head_hidden, c.latent),
+                &p,
                 "enc.logvar",
-                2 * c.enc_hidden,
-                &c.head_hidden,
-                c.latent,
             )?,
         };
         let decoder = Decoder {
-            input: Linear::new(&mut p, "dec.input", c.latent, c.dec_input)?,
-            lstm: Lstm::new(&mut p, "dec.lstm", c.dec_input, c.dec_hidden)?,
+            input: Linear::new(&p, "dec.input", c.latent, c.dec_input)?,
+            lstm: Lstm::new(&p, "dec.lstm", c.dec_input, c.dec_hidden)?,
             out: Mlp::new(
-                &mut p,
+                &MlpConfig::new(c.dec_hidden, &c.dec_mlp_hidden, frame_dim),
+                &p,
                 "dec.out",
-                c.dec_hidden,
-                &c.dec_mlp_hidden,
-                frame_dim,
             )?,
         };
         let frame_disc = FrameDiscriminator {
-            mlp: Mlp::new(&mut p, "fdis.mlp", frame_dim, &c.frame_disc_hidden, 1)?,
+            mlp: Mlp::new(
+                &MlpConfig::new(frame_dim, &c.frame_disc_hidden, 1),
+                &p,
+                "fdis.mlp",
+            )?,
         };
         let seq_disc = SequenceDiscriminator {
-            lstm: BiLstm::new(&mut p, "sdis.lstm", frame_dim, c.seq_disc_hidden)?,
-            out: Linear::new(&mut p, "sdis.out", 2 * c.seq_disc_hidden, 1)?,
+            lstm: BiLstm::new(&p, "sdis.lstm", frame_dim, c.seq_disc_hidden)?,
+            out: Linear::new(&p, "sdis.out", 2 * c.seq_disc_hidden, 1)?,
         };
         Ok(Vae {
             config: config.clone(),

@@ -8,12 +8,11 @@
 
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
+use candle_core::Tensor;
 use motion::Motion;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Batch, Dataset};
@@ -22,8 +21,8 @@ use crate::features::FeatureConfig;
 use crate::latent::{LatentStats, NearConfig};
 use crate::loss::{self, Denorm, LossWeights};
 use crate::model::{DISCRIMINATORS, GENERATOR, Vae, VaeConfig};
-use crate::optim::{Optimizer, OptimizerConfig};
 use crate::trained::{ModelMeta, TrainedVae, TrainingSummary};
+use nn::{Optimizer, OptimizerConfig};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
@@ -66,7 +65,10 @@ impl TrainConfig {
     pub fn reference() -> Self {
         TrainConfig {
             model: VaeConfig::reference(),
-            optimizer: OptimizerConfig::reference(),
+            optimizer: OptimizerConfig::Sgd {
+                lr: 0.005,
+                halve_every: 4000,
+            },
             iterations: 20_000,
             ..TrainConfig::default()
         }
@@ -210,17 +212,14 @@ impl Trainer {
         let w = self.config.weights;
         let (mu, logvar) = vae.encoder.forward(&batch.x, &batch.mask)?;
         let (b, latent) = mu.dims2()?;
-        let eps: Vec<f32> = (0..b * latent)
-            .map(|_| StandardNormal.sample(&mut self.rng))
-            .collect();
-        let eps = Tensor::from_vec(eps, (b, latent), &Device::Cpu)?;
-        let z = (&mu + (logvar.clone() * 0.5)?.exp()?.mul(&eps)?)?;
+        let eps = nn::normal(&[b, latent], &mut self.rng)?;
+        let z = nn::reparameterise(&mu, &logvar, &eps)?;
         let frames = batch.x.dim(1)?;
         let xhat = vae.decoder.forward(&z, frames)?;
         let raw_hat = self.denorm.apply(&xhat)?;
         let (root, rot) = loss::reconstruction(&raw_hat, &batch.raw, &target_rot, &batch.mask)?;
         let smooth = loss::smoothness(&raw_hat, &batch.mask)?;
-        let kl = loss::kl(&mu, &logvar)?;
+        let kl = nn::kl_mean(&mu, &logvar)?;
         let mut total = ((&root + &rot)? + ((smooth.clone() * w.smooth)? + (kl.clone() * w.kl)?)?)?;
         let mut adv = 0.0;
         if self.config.adversarial {

@@ -24,8 +24,8 @@ use crate::latent::{LatentStats, Prior, sample_normal};
 use crate::loss::LossWeights;
 use crate::model::{Vae, VaeConfig};
 use crate::normalize::NormStats;
-use crate::optim::OptimizerConfig;
 use crate::train::Losses;
+use nn::OptimizerConfig;
 
 pub const FORMAT: u32 = 1;
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
@@ -289,7 +289,7 @@ impl TrainedVae {
         let tensors = candle_core::safetensors::load(&weights_path, &Device::Cpu)
             .map_err(|e| VaeError::Model(format!("{}: {e}", weights_path.display())))?;
         for (name, var) in vae.params.vars() {
-            let t = tensors.get(name).ok_or_else(|| {
+            let t = tensors.get(&name).ok_or_else(|| {
                 VaeError::Model(format!(
                     "{}: tensor `{name}` missing",
                     weights_path.display()

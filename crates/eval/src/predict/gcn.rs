@@ -10,7 +10,7 @@
 //! frames; the loss covers both, as in the original.
 
 use candle_core::Tensor;
-use vae::params::Params;
+use nn::Params;
 
 use crate::error::{EvalError, Result};
 use crate::predict::{Predictor, dct, mse};
@@ -49,7 +49,7 @@ struct GraphConv {
 }
 
 impl GraphConv {
-    fn new(p: &mut Params, name: &str, nodes: usize, f_in: usize, f_out: usize) -> Result<Self> {
+    fn new(p: &Params, name: &str, nodes: usize, f_in: usize, f_out: usize) -> Result<Self> {
         // Mao et al.: uniform in +-1/sqrt(out features) for every tensor.
         let b = 1.0 / (f_out as f32).sqrt();
         Ok(GraphConv {
@@ -98,16 +98,16 @@ impl Gcn {
                 "gcn: need positive sizes and coefficients <= frames, got {c:?}"
             )));
         }
-        let mut p = Params::new(seed);
-        let input = GraphConv::new(&mut p, "gc_in", c.dim, c.coefficients, c.hidden)?;
+        let p = Params::new(seed);
+        let input = GraphConv::new(&p, "gc_in", c.dim, c.coefficients, c.hidden)?;
         let mut blocks = Vec::with_capacity(c.stages);
         for s in 0..c.stages {
             blocks.push((
-                GraphConv::new(&mut p, &format!("block{s}.gc1"), c.dim, c.hidden, c.hidden)?,
-                GraphConv::new(&mut p, &format!("block{s}.gc2"), c.dim, c.hidden, c.hidden)?,
+                GraphConv::new(&p, &format!("block{s}.gc1"), c.dim, c.hidden, c.hidden)?,
+                GraphConv::new(&p, &format!("block{s}.gc2"), c.dim, c.hidden, c.hidden)?,
             ));
         }
-        let output = GraphConv::new(&mut p, "gc_out", c.dim, c.hidden, c.coefficients)?;
+        let output = GraphConv::new(&p, "gc_out", c.dim, c.hidden, c.coefficients)?;
         let dct = dct::basis_tensor(c.coefficients, c.frames)?;
         Ok(Gcn {
             config: c,

@@ -6,7 +6,10 @@
 //!   (rotation vectors of the non-root joints), normalisation, batches.
 //! * [`seq2seq`]: the RNN baseline (one GRU, residual velocity decoding).
 //! * [`dct`], [`gcn`]: the DCT + graph-convolution model.
-//! * [`train`]: the training loop (AdamW, gradient clipping, seeded batches).
+//! * [`train`]: the training loop (the `nn` optimiser: AdamW after global
+//!   gradient-norm clipping; seeded batches).
+//!
+//! The models are built from the `nn` crate's seeded parameter store and layers.
 //! * [`protocol`]: one leave-one-actor-out run: train, predict, score.
 
 pub mod data;
@@ -17,7 +20,7 @@ pub mod seq2seq;
 pub mod train;
 
 use candle_core::Tensor;
-use vae::params::Params;
+use nn::Params;
 
 use crate::error::Result;
 

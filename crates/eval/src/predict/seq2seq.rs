@@ -8,8 +8,7 @@ use std::collections::HashMap;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::rnn::{GRU, GRUConfig, RNN};
-use vae::nn::Linear;
-use vae::params::Params;
+use nn::{Linear, Params};
 
 use crate::error::{EvalError, Result};
 use crate::predict::{Predictor, mse};
@@ -40,7 +39,7 @@ impl Seq2Seq {
             return Err(EvalError::Config("seq2seq sizes must be positive".into()));
         }
         let (d, h) = (config.dim, config.hidden);
-        let mut params = Params::new(seed);
+        let params = Params::new(seed);
         // PyTorch's GRU initialisation: uniform in +-1/sqrt(hidden).
         let bound = 1.0 / (h as f32).sqrt();
         let mut t = HashMap::new();
@@ -57,7 +56,7 @@ impl Seq2Seq {
         }
         let vb = candle_nn::VarBuilder::from_tensors(t, DType::F32, &Device::Cpu);
         let gru = candle_nn::rnn::gru(d, h, GRUConfig::default(), vb)?;
-        let out = Linear::new(&mut params, "out", h, d)?;
+        let out = Linear::new(&params, "out", h, d)?;
         Ok(Seq2Seq { gru, out, params })
     }
 

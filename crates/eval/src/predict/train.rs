@@ -1,11 +1,11 @@
-//! Training a [`Predictor`]: AdamW (candle-nn's; no hand-written optimiser),
-//! global gradient-norm clipping, batches of windows drawn uniformly with a
-//! seeded ChaCha RNG, a fixed number of iterations (so a model trained with
-//! augmented clips gets the same budget as one without).
+//! Training a [`Predictor`]: the `nn` crate's optimiser (AdamW after global
+//! gradient-norm clipping), batches of windows drawn uniformly with a seeded
+//! ChaCha RNG, a fixed number of iterations (so a model trained with augmented
+//! clips gets the same budget as one without).
 
 use std::time::Instant;
 
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use nn::{AdamConfig, Optimizer};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -67,20 +67,14 @@ pub fn train(
     let span = tracing::info_span!("train_predictor", iterations = config.iterations, seed);
     let _guard = span.enter();
     let start = Instant::now();
-    let vars: Vec<candle_core::Var> = model
-        .params()
-        .vars()
-        .iter()
-        .map(|(_, v)| v.clone())
-        .collect();
-    let mut opt = AdamW::new(
-        vars.clone(),
-        ParamsAdamW {
-            lr: config.lr,
+    let mut opt = Optimizer::new(
+        model.params().vars(),
+        AdamConfig {
             weight_decay: config.weight_decay,
-            ..ParamsAdamW::default()
+            ..AdamConfig::new(config.lr)
         },
-    )?;
+        Some(config.max_grad_norm as f32),
+    );
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_ba7c);
     let tenth = (config.iterations / 10).max(1);
     let (mut first, mut last) = (0.0, 0.0);
@@ -96,24 +90,7 @@ pub fn train(
                 "training diverged at iteration {it} (loss {value})"
             )));
         }
-        let mut grads = loss.backward()?;
-        let mut sq = 0f64;
-        for v in &vars {
-            if let Some(g) = grads.get(v) {
-                sq += g.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
-            }
-        }
-        let norm_g = sq.sqrt();
-        if norm_g > config.max_grad_norm {
-            let scale = config.max_grad_norm / norm_g;
-            for v in &vars {
-                if let Some(g) = grads.get(v) {
-                    let scaled = g.affine(scale, 0.0)?;
-                    grads.insert(v, scaled);
-                }
-            }
-        }
-        opt.step(&grads)?;
+        opt.step(&loss.backward()?)?;
         if it < tenth {
             first += value / tenth as f64;
         }
