@@ -153,6 +153,20 @@ impl ResidualSchedule {
         1.0 - (1.0 - self.final_scale) * t
     }
 
+    /// Training environments run at the scale of the iteration to come.
+    fn apply(&self, trainer: &mut Trainer<ImitationTask>) {
+        let scale = self.scale(trainer.progress().iterations);
+        for task in trainer.envs_mut() {
+            task.env.set_residual_scale(scale);
+        }
+    }
+
+    /// The rollouts that judge the policy run at the scale it was last
+    /// trained at.
+    fn judged(&self, trainer: &Trainer<ImitationTask>) -> f32 {
+        self.scale(trainer.progress().iterations.saturating_sub(1))
+    }
+
     fn validate(&self) -> Result<(), CorrectError> {
         if !(self.final_scale.is_finite() && (0.0..=1.0).contains(&self.final_scale))
             || self.over_iterations == 0
@@ -199,11 +213,60 @@ pub fn correct(
     config.validate()?;
     let span = tracing::info_span!("correct", source, residual = ?config.physics.residual);
     let _guard = span.enter();
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| CorrectError::Io { path, source }
+    let (checkpoints, has_checkpoint) = prepare_dir(out_dir, resume)?;
+
+    let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
+    let before = motion::metrics::plausibility(motion);
+    let action0 = deterministic_rollout(&mut eval_env, |_, a| {
+        a.fill(0.0);
+        Ok(())
+    })?;
+    let (mut trainer, warm_from) = trainer_for(motion, config, &checkpoints, has_checkpoint)?;
+    let (reason, reached_target) = train(
+        &mut trainer,
+        &mut eval_env,
+        &before,
+        config,
+        &checkpoints,
+        &mut on_progress,
+    )?;
+
+    eval_env.set_residual_scale(config.residual_schedule.judged(&trainer));
+    let final_rollout = evaluate(&trainer, &mut eval_env)?;
+    let stop_reason = match reason {
+        StopReason::Callback if reached_target => "target",
+        StopReason::Callback => "stopped",
+        StopReason::TimeBudget => "time_budget",
+        StopReason::MaxIterations => "max_iterations",
+        StopReason::MaxSamples => "max_samples",
     };
-    std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
+    let report = report(
+        source,
+        config,
+        &trainer,
+        &final_rollout,
+        &action0,
+        before,
+        Finish {
+            stop_reason,
+            warm_from,
+            residual_scale: eval_env.residual_scale(),
+        },
+    );
+    write_outputs(out_dir, &final_rollout, &report)?;
+    Ok(Outcome {
+        motion: final_rollout.motion,
+        report,
+    })
+}
+
+/// Creates `out_dir`; its checkpoints folder and whether it holds a
+/// checkpoint, which only `resume` may continue.
+fn prepare_dir(out_dir: &Path, resume: bool) -> Result<(PathBuf, bool), CorrectError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| CorrectError::Io {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
     let checkpoints = out_dir.join("checkpoints");
     let has_checkpoint = ppo::latest_checkpoint(&checkpoints)?.is_some();
     if has_checkpoint && !resume {
@@ -213,50 +276,54 @@ pub fn correct(
             checkpoints.display()
         )));
     }
+    Ok((checkpoints, has_checkpoint))
+}
 
+/// The trainer over `config.envs` environments: resumed from this job's
+/// checkpoint, else fresh (warm-started from `config.warm_start`, whose
+/// checkpoint it names).
+fn trainer_for(
+    motion: &Motion,
+    config: &CorrectConfig,
+    checkpoints: &Path,
+    has_checkpoint: bool,
+) -> Result<(Trainer<ImitationTask>, Option<String>), CorrectError> {
     let envs = (0..config.envs)
         .map(|_| ImitationEnv::new(motion, &config.physics).map(ImitationTask::new))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
-    let before = motion::metrics::plausibility(motion);
-    let action0 = deterministic_rollout(&mut eval_env, |_, a| {
-        a.fill(0.0);
-        Ok(())
-    })?;
-
-    let mut warm_from = None;
-    let mut trainer = if has_checkpoint {
+    if has_checkpoint {
         let (trainer, _) =
-            Trainer::new_or_resume(config.ppo.clone(), envs, config.seed, &checkpoints)?;
+            Trainer::new_or_resume(config.ppo.clone(), envs, config.seed, checkpoints)?;
         tracing::info!(iterations = trainer.progress().iterations, "resumed");
-        trainer
-    } else {
-        let mut trainer = Trainer::new(config.ppo.clone(), envs, config.seed)?;
-        if let Some(from) = &config.warm_start {
-            warm_from = Some(trainer.warm_start(from)?.display().to_string());
-        }
-        trainer
+        return Ok((trainer, None));
+    }
+    let mut trainer = Trainer::new(config.ppo.clone(), envs, config.seed)?;
+    let warm_from = match &config.warm_start {
+        Some(from) => Some(trainer.warm_start(from)?.display().to_string()),
+        None => None,
     };
+    Ok((trainer, warm_from))
+}
 
-    // Training environments run at the scale of the iteration to come; the
-    // rollouts that judge the policy at the scale it was last trained at.
+/// PPO within the limits, a deterministic rollout every `eval_every`
+/// iterations (stopping once it meets the R_norm target and every
+/// acceptance criterion), the residual schedule applied between iterations.
+/// Returns why training stopped and whether the target was met.
+fn train(
+    trainer: &mut Trainer<ImitationTask>,
+    eval_env: &mut ImitationEnv,
+    before: &motion::metrics::Plausibility,
+    config: &CorrectConfig,
+    checkpoints: &Path,
+    on_progress: &mut impl FnMut(&ProgressEvent),
+) -> Result<(StopReason, bool), CorrectError> {
     let schedule = config.residual_schedule;
-    let train_scale = |trainer: &mut Trainer<ImitationTask>| {
-        let scale = schedule.scale(trainer.progress().iterations);
-        for task in trainer.envs_mut() {
-            task.env.set_residual_scale(scale);
-        }
-    };
-    let judged_scale = |trainer: &Trainer<ImitationTask>| {
-        schedule.scale(trainer.progress().iterations.saturating_sub(1))
-    };
-    train_scale(&mut trainer);
-
+    schedule.apply(trainer);
     let limits = RunLimits {
         time_budget_s: Some(config.time_budget_s),
         max_iterations: config.max_iterations,
         max_samples: config.max_samples,
-        checkpoint_dir: Some(checkpoints.clone()),
+        checkpoint_dir: Some(checkpoints.to_path_buf()),
         checkpoint_every_s: config.checkpoint_every_s,
         keep_checkpoints: 2,
     };
@@ -275,8 +342,8 @@ pub fn correct(
     let reason = trainer.run(&limits, |trainer, it| {
         let mut r_norm = None;
         if it.iteration % config.eval_every == 0 {
-            eval_env.set_residual_scale(judged_scale(trainer));
-            match evaluate(trainer, &mut eval_env) {
+            eval_env.set_residual_scale(schedule.judged(trainer));
+            match evaluate(trainer, eval_env) {
                 Ok(rollout) => {
                     let r = rollout.r_norm();
                     trainer.record_eval(r);
@@ -284,12 +351,12 @@ pub fn correct(
                     // Judging costs a forward-kinematics pass over the clip:
                     // only when the R_norm target is met.
                     reached_target = config.target_r_norm.is_some_and(|t| r >= t)
-                        && accepted(&rollout, &before, &config.acceptance);
+                        && accepted(&rollout, before, &config.acceptance);
                 }
                 Err(err) => eval_error = Some(err),
             }
         }
-        train_scale(trainer);
+        schedule.apply(trainer);
         on_progress(&ProgressEvent {
             iteration: it.iteration,
             samples: it.samples,
@@ -316,11 +383,29 @@ pub fn correct(
         session_s = started.elapsed().as_secs_f64(),
         "training stopped"
     );
+    Ok((reason, reached_target))
+}
 
-    eval_env.set_residual_scale(judged_scale(&trainer));
-    let final_rollout = evaluate(&trainer, &mut eval_env)?;
-    let after = motion::metrics::plausibility(&final_rollout.motion);
-    let criteria = judge(&final_rollout, &before, &after, &config.acceptance);
+/// How training ended, for the report.
+struct Finish {
+    stop_reason: &'static str,
+    warm_from: Option<String>,
+    residual_scale: f32,
+}
+
+/// The report of the final rollout: its figures, every acceptance criterion,
+/// the learning curve and the plausibility before and after.
+fn report(
+    source: &str,
+    config: &CorrectConfig,
+    trainer: &Trainer<ImitationTask>,
+    rollout: &Rollout,
+    action0: &Rollout,
+    before: motion::metrics::Plausibility,
+    finish: Finish,
+) -> Report {
+    let after = motion::metrics::plausibility(&rollout.motion);
+    let criteria = judge(rollout, &before, &after, &config.acceptance);
     let progress = trainer.progress();
     // The curve starts at the untrained tracker (action 0, which the fresh
     // policy's near-zero output layer approximates), then one point per evaluation.
@@ -332,18 +417,11 @@ pub fn correct(
                 .filter_map(|p| p.eval.map(|r| [p.wall_s, p.samples as f64, r])),
         )
         .collect();
-    let stop_reason = match reason {
-        StopReason::Callback if reached_target => "target",
-        StopReason::Callback => "stopped",
-        StopReason::TimeBudget => "time_budget",
-        StopReason::MaxIterations => "max_iterations",
-        StopReason::MaxSamples => "max_samples",
-    };
-    let report = Report {
+    Report {
         source: source.to_string(),
-        r_norm: final_rollout.r_norm(),
-        mean_reward: final_rollout.mean_reward(),
-        residual_force_ratio: final_rollout.residual_force_ratio(),
+        r_norm: rollout.r_norm(),
+        mean_reward: rollout.mean_reward(),
+        residual_force_ratio: rollout.residual_force_ratio(),
         samples: progress.samples,
         wall_s: progress.wall_s,
         iterations: progress.iterations,
@@ -356,22 +434,17 @@ pub fn correct(
             .collect(),
         criteria,
         accept_threshold: config.acceptance.min_mean_reward,
-        fell_at: final_rollout.fell_at,
+        fell_at: rollout.fell_at,
         r_norm_action0: action0.r_norm(),
-        stop_reason: stop_reason.to_string(),
+        stop_reason: finish.stop_reason.to_string(),
         residual: residual_name(config.physics.residual).to_string(),
-        residual_scale: eval_env.residual_scale() as f64,
-        fps: final_rollout.motion.fps(),
-        frames: final_rollout.motion.frames(),
-        warm_start: warm_from,
+        residual_scale: finish.residual_scale as f64,
+        fps: rollout.motion.fps(),
+        frames: rollout.motion.frames(),
+        warm_start: finish.warm_from,
         plausibility_before: before,
         plausibility_after: after,
-    };
-    write_outputs(out_dir, &final_rollout, &report)?;
-    Ok(Outcome {
-        motion: final_rollout.motion,
-        report,
-    })
+    }
 }
 
 /// Whether `rollout` passes every acceptance criterion.

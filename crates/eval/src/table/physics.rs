@@ -129,6 +129,77 @@ struct Seen {
     said_warm_start: bool,
 }
 
+impl Seen {
+    /// Keeps what the runner reports: when jobs start (for timings and the
+    /// warm-start line), and every correction's report and accepted clip.
+    fn observe(
+        &mut self,
+        event: pipeline::Event<'_>,
+        originals: &[String],
+        total: usize,
+        log: Log,
+    ) {
+        match event {
+            pipeline::Event::JobStarted { job } => {
+                self.job_started = Some(Instant::now());
+                match &job.kind {
+                    pipeline::JobKind::Correct { .. } if !self.said_warm_start => {
+                        self.said_warm_start = true;
+                        log(&warm_start_line(originals, &self.reports));
+                    }
+                    pipeline::JobKind::DebiasTrain { .. } => {
+                        self.debias_started = Some(Instant::now())
+                    }
+                    _ => {}
+                }
+            }
+            pipeline::Event::Corrected {
+                job,
+                report,
+                motion,
+            } => {
+                self.done += 1;
+                let Some(name) = job.kind.clip() else { return };
+                log(&format!(
+                    "correct {}/{total} {name}: R_norm {:.3} -> {:.3}, {} samples, {}, {:.1} s",
+                    self.done,
+                    report.r_norm_action0,
+                    report.r_norm,
+                    report.samples,
+                    if report.accepted {
+                        "accepted"
+                    } else {
+                        "rejected"
+                    },
+                    self.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                ));
+                if report.accepted && matches!(job.kind, pipeline::JobKind::Correct { .. }) {
+                    self.corrected.insert(name.to_string(), motion.clone());
+                }
+                self.reports.insert(name.to_string(), report.clone());
+            }
+            _ => {}
+        }
+    }
+}
+
+/// The run's failures, but for the expected ones: nothing to debias (no
+/// accepted original, or the sample's own correction was rejected).
+fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
+    let rejected: HashSet<&str> = run.rejected.iter().map(String::as_str).collect();
+    run.failures
+        .iter()
+        .filter(|(key, _)| {
+            let expected = (key == "debias_train" && no_pairs)
+                || key
+                    .strip_prefix("debias_apply:")
+                    .is_some_and(|clip| no_pairs || rejected.contains(clip));
+            !expected
+        })
+        .map(|(key, reason)| format!("{key}: {reason}"))
+        .collect()
+}
+
 /// Corrects `samples` (a subset of them, see [`PhysicsConfig`]) and the
 /// training clips in `work`, then debiases; finished corrections in `work`
 /// are reused, interrupted ones resumed.
@@ -182,47 +253,8 @@ pub fn correct_and_debias(
     let total = originals.len() + subset.len();
     let seen = Mutex::new(Seen::default());
     let on_event = |event: pipeline::Event<'_>| {
-        let Ok(mut seen) = seen.lock() else { return };
-        match event {
-            pipeline::Event::JobStarted { job } => {
-                seen.job_started = Some(Instant::now());
-                match &job.kind {
-                    pipeline::JobKind::Correct { .. } if !seen.said_warm_start => {
-                        seen.said_warm_start = true;
-                        log(&warm_start_line(&original_names, &seen.reports));
-                    }
-                    pipeline::JobKind::DebiasTrain { .. } => {
-                        seen.debias_started = Some(Instant::now())
-                    }
-                    _ => {}
-                }
-            }
-            pipeline::Event::Corrected {
-                job,
-                report,
-                motion,
-            } => {
-                seen.done += 1;
-                let Some(name) = job.kind.clip() else { return };
-                log(&format!(
-                    "correct {}/{total} {name}: R_norm {:.3} -> {:.3}, {} samples, {}, {:.1} s",
-                    seen.done,
-                    report.r_norm_action0,
-                    report.r_norm,
-                    report.samples,
-                    if report.accepted {
-                        "accepted"
-                    } else {
-                        "rejected"
-                    },
-                    seen.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
-                ));
-                if report.accepted && matches!(job.kind, pipeline::JobKind::Correct { .. }) {
-                    seen.corrected.insert(name.to_string(), motion.clone());
-                }
-                seen.reports.insert(name.to_string(), report.clone());
-            }
-            _ => {}
+        if let Ok(mut seen) = seen.lock() {
+            seen.observe(event, &original_names, total, log);
         }
     };
     let tune_correction = tune(config);
@@ -266,21 +298,7 @@ pub fn correct_and_debias(
     // The accepted originals are exactly the debiaser's training pairs.
     summary.debias_pairs = summary.originals_accepted;
     let no_pairs = summary.originals_accepted == 0;
-    let rejected: HashSet<&str> = run.rejected.iter().map(String::as_str).collect();
-    let failures: Vec<String> = run
-        .failures
-        .iter()
-        .filter(|(key, _)| {
-            // Expected: nothing to debias (no accepted original, or the
-            // sample's own correction was rejected).
-            let expected = (key == "debias_train" && no_pairs)
-                || key
-                    .strip_prefix("debias_apply:")
-                    .is_some_and(|clip| no_pairs || rejected.contains(clip));
-            !expected
-        })
-        .map(|(key, reason)| format!("{key}: {reason}"))
-        .collect();
+    let failures = unexpected_failures(&run, no_pairs);
     if !failures.is_empty() {
         return Err(EvalError::Correction(failures.join("; ")));
     }
