@@ -126,12 +126,20 @@ impl Criterion {
         }
     }
 
+    /// `<=` or `>=`: how `value` must compare with `limit`.
+    pub fn op(&self) -> &'static str {
+        if self.at_most { "<=" } else { ">=" }
+    }
+
     /// Why it failed, in one line.
     pub fn failure(&self) -> String {
-        let op = if self.at_most { "<=" } else { ">=" };
         format!(
-            "{} {:.3} (needs {op} {:.3}): {}",
-            self.name, self.value, self.limit, self.meaning
+            "{} {:.3} (needs {} {:.3}): {}",
+            self.name,
+            self.value,
+            self.op(),
+            self.limit,
+            self.meaning
         )
     }
 }

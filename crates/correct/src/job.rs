@@ -222,7 +222,7 @@ pub fn correct(
         Ok(())
     })?;
     let (mut trainer, warm_from) = trainer_for(motion, config, &checkpoints, has_checkpoint)?;
-    let (reason, reached_target) = train(
+    let (reason, at_target) = train(
         &mut trainer,
         &mut eval_env,
         &before,
@@ -231,8 +231,16 @@ pub fn correct(
         &mut on_progress,
     )?;
 
-    eval_env.set_residual_scale(config.residual_schedule.judged(&trainer));
-    let final_rollout = evaluate(&trainer, &mut eval_env)?;
+    // Stopped at the target: the rollout that met it is the final one (the
+    // policy has not changed since); else roll the final policy out.
+    let reached_target = at_target.is_some();
+    let final_rollout = match at_target {
+        Some(rollout) => rollout,
+        None => {
+            eval_env.set_residual_scale(config.residual_schedule.judged(&trainer));
+            evaluate(&trainer, &mut eval_env)?
+        }
+    };
     let stop_reason = match reason {
         StopReason::Callback if reached_target => "target",
         StopReason::Callback => "stopped",
@@ -308,7 +316,8 @@ fn trainer_for(
 /// PPO within the limits, a deterministic rollout every `eval_every`
 /// iterations (stopping once it meets the R_norm target and every
 /// acceptance criterion), the residual schedule applied between iterations.
-/// Returns why training stopped and whether the target was met.
+/// Returns why training stopped and, when the target was met, the rollout
+/// that met it.
 fn train(
     trainer: &mut Trainer<ImitationTask>,
     eval_env: &mut ImitationEnv,
@@ -316,7 +325,7 @@ fn train(
     config: &CorrectConfig,
     checkpoints: &Path,
     on_progress: &mut impl FnMut(&ProgressEvent),
-) -> Result<(StopReason, bool), CorrectError> {
+) -> Result<(StopReason, Option<Rollout>), CorrectError> {
     let schedule = config.residual_schedule;
     schedule.apply(trainer);
     let limits = RunLimits {
@@ -328,7 +337,7 @@ fn train(
         keep_checkpoints: 2,
     };
     let mut eval_error = None;
-    let mut reached_target = false;
+    let mut at_target = None;
     let stop_requested = || {
         config
             .stop
@@ -350,8 +359,11 @@ fn train(
                     r_norm = Some(r);
                     // Judging costs a forward-kinematics pass over the clip:
                     // only when the R_norm target is met.
-                    reached_target = config.target_r_norm.is_some_and(|t| r >= t)
-                        && accepted(&rollout, before, &config.acceptance);
+                    if config.target_r_norm.is_some_and(|t| r >= t)
+                        && accepted(&rollout, before, &config.acceptance)
+                    {
+                        at_target = Some(rollout);
+                    }
                 }
                 Err(err) => eval_error = Some(err),
             }
@@ -365,7 +377,7 @@ fn train(
             mean_reward: it.mean_reward,
             r_norm,
         });
-        if eval_error.is_some() || reached_target || stop_requested() {
+        if eval_error.is_some() || at_target.is_some() || stop_requested() {
             Control::Stop
         } else {
             Control::Continue
@@ -374,7 +386,7 @@ fn train(
     if let Some(err) = eval_error {
         return Err(err);
     }
-    if stop_requested() && !reached_target {
+    if stop_requested() && at_target.is_none() {
         tracing::info!("stopped on request; checkpoint saved");
         return Err(CorrectError::Stopped);
     }
@@ -383,7 +395,7 @@ fn train(
         session_s = started.elapsed().as_secs_f64(),
         "training stopped"
     );
-    Ok((reason, reached_target))
+    Ok((reason, at_target))
 }
 
 /// How training ended, for the report.

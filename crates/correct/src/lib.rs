@@ -11,6 +11,7 @@
 //! * [`job`]: one correction job: train within a budget, evaluate, checkpoint,
 //!   resume, and write the outputs.
 //! * [`report`]: `report.json` and the learning-curve SVG.
+//! * [`summary`]: the corrections of a class in one table (`motionaug bench correction`).
 //!
 //! ## Honest acceptance, measured (2026-12-02)
 //!
@@ -48,7 +49,6 @@
 //! not on their soles in 24-80 % of planted frames, the dg jog falling, and
 //! grab skating 0.035 m/s where its clean input skates 0.008-0.020. The
 //! earlier tables below predate the criteria (they judged mean reward only).
-//! * [`summary`]: the corrections of a class in one table (`motionaug bench correction`).
 //!
 //! Measured on 2026-11-22 (2-core machine, release build, defaults: [256, 256]
 //! nets, 8 envs, 2 threads, 4096 samples per iteration; `motionaug correct
@@ -119,6 +119,11 @@ pub enum CorrectError {
     },
     #[error("invalid correction settings: {0}")]
     Config(String),
+    #[error("{path}: not a correction report: {message}")]
+    BadReport {
+        path: std::path::PathBuf,
+        message: String,
+    },
     #[error("stopped on request before the end of training (a checkpoint was saved)")]
     Stopped,
 }

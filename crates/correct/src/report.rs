@@ -1,9 +1,12 @@
 //! `report.json` and the learning-curve plot written next to a corrected clip.
 
-use motion::metrics::Plausibility;
+use std::path::Path;
 
-use crate::acceptance::Criterion;
+use motion::metrics::Plausibility;
 use serde::{Deserialize, Serialize};
+
+use crate::CorrectError;
+use crate::acceptance::Criterion;
 
 /// Everything a user needs to judge one correction.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -58,6 +61,20 @@ pub struct Report {
 
 fn one() -> f64 {
     1.0
+}
+
+impl Report {
+    /// A `report.json` as a finished correction wrote it.
+    pub fn read(path: &Path) -> Result<Report, CorrectError> {
+        let bytes = std::fs::read(path).map_err(|source| CorrectError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        serde_json::from_slice(&bytes).map_err(|e| CorrectError::BadReport {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
 }
 
 /// The learning curve (R_norm against wall time) as a small standalone SVG.

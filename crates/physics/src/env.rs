@@ -167,8 +167,8 @@ pub struct StepInfo {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FootContact {
     /// Height of the sole's heel above the floor, m (see
-    /// [`CharacterSpec::sole_points`]; the lowest point of the foot's shape
-    /// when it is not a box).
+    /// [`CharacterSpec::sole_points`]; the shape's centre when the foot is
+    /// not a box).
     pub heel_m: f32,
     /// Height of the sole's toe above the floor, m.
     pub toe_m: f32,
@@ -586,11 +586,15 @@ impl ImitationEnv {
             }
         }
         let fell = run.fell;
-        let (reward, r_imit) = if fell || broken || !r_imit.is_finite() {
-            (0.0, 0.0)
+        let (reward, paper_reward, r_imit) = if fell || broken || !r_imit.is_finite() {
+            (0.0, 0.0, 0.0)
         } else {
             let w = self.config.sole_reward_weight;
-            ((0.9 - w) * r_imit + 0.1 * r_res + w * r_sole, r_imit)
+            (
+                (0.9 - w) * r_imit + 0.1 * r_res + w * r_sole,
+                0.9 * r_imit + 0.1 * r_res,
+                r_imit,
+            )
         };
         let terminated = fell || broken;
         let truncated = !terminated && self.frame + 1 >= self.reference.len();
@@ -604,30 +608,23 @@ impl ImitationEnv {
                 residual_force: run.mean_force,
                 residual_torque: run.mean_torque,
                 fell,
-                paper_reward: if reward > 0.0 {
-                    0.9 * r_imit + 0.1 * r_res
-                } else {
-                    0.0
-                },
+                paper_reward,
                 frame: self.frame,
             },
         }
     }
 
     /// `exp(-sum (h_heel^2 + h_toe^2) / scale^2)` over the feet touching the
-    /// ground (heights above the floor, 0 below it); 1 when none touches.
+    /// ground (heights above the floor, 0 below it); 1 when none touches. A
+    /// foot that is not a box counts its centre as heel and toe.
     fn sole_reward(&self) -> f32 {
         let mut e = 0.0;
         for &b in &self.spec.feet {
             if !self.sim.touches_ground(b) {
                 continue;
             }
-            let Some(points) = self.spec.sole_points(b) else {
-                continue;
-            };
-            let s = self.sim.state[b];
-            for p in points {
-                let h = (s.pos + s.rot * p).y.max(0.0);
+            for p in self.sole_world(b) {
+                let h = p.y.max(0.0);
                 e += h * h;
             }
         }
@@ -831,6 +828,19 @@ impl ImitationEnv {
         &self.sim.state
     }
 
+    /// Heel and toe of foot body `b` in the world now
+    /// ([`CharacterSpec::sole_points`]; the shape's centre twice when the foot
+    /// is not a box).
+    #[inline]
+    fn sole_world(&self, b: usize) -> [Vec3; 2] {
+        let s = self.sim.state[b];
+        let local = self.spec.sole_points(b).unwrap_or_else(|| {
+            let c = self.spec.bodies[b].com_local;
+            [c, c]
+        });
+        local.map(|p| s.pos + s.rot * p)
+    }
+
     /// How each foot (in [`CharacterSpec::feet`] order) meets the floor now.
     pub fn foot_contacts(&self) -> Vec<FootContact> {
         self.spec
@@ -838,11 +848,7 @@ impl ImitationEnv {
             .iter()
             .map(|&b| {
                 let s = self.sim.state[b];
-                let [heel, toe] = self.spec.sole_points(b).unwrap_or_else(|| {
-                    let c = self.spec.bodies[b].com_local;
-                    [c, c]
-                });
-                let (heel, toe) = (s.pos + s.rot * heel, s.pos + s.rot * toe);
+                let [heel, toe] = self.sole_world(b);
                 let mid = 0.5 * (heel + toe);
                 let v = s.vel + s.angvel.cross(mid - s.pos);
                 FootContact {

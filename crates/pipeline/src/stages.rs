@@ -227,14 +227,7 @@ pub fn finished_correction(
     if !(report_path.is_file() && exact.is_file()) {
         return Ok(None);
     }
-    let report: correct::Report =
-        serde_json::from_slice(&std::fs::read(&report_path).map_err(|source| {
-            PipelineError::Io {
-                path: report_path.clone(),
-                source,
-            }
-        })?)
-        .map_err(|e| PipelineError::Job(format!("{}: {e}", report_path.display())))?;
+    let report = correct::Report::read(&report_path)?;
     let bytes = std::fs::read(&exact).map_err(|source| PipelineError::Io {
         path: exact.clone(),
         source,

@@ -87,10 +87,7 @@ fn correct_one(
 ) -> anyhow::Result<correct::Report> {
     let done = dir.join("report.json");
     if done.is_file() {
-        let bytes =
-            std::fs::read(&done).with_context(|| format!("cannot read {}", done.display()))?;
-        return serde_json::from_slice(&bytes)
-            .with_context(|| format!("bad report {}", done.display()));
+        return Ok(correct::Report::read(&done)?);
     }
     let motion = motion::io::load(
         path,
@@ -123,8 +120,8 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for class in &args.classes {
         let clips = eval::dataset::find_clips(&args.data, class)?;
-        let n = args.per_class.min(clips.len());
-        let chosen: Vec<_> = (0..n).map(|i| &clips[i * clips.len() / n.max(1)]).collect();
+        let chosen = eval::table::physics::spread(&clips, args.per_class);
+        let n = chosen.len();
         let mut reports = Vec::new();
         for (i, clip) in chosen.iter().enumerate() {
             let asf = args.data.join(format!("HDM_{}.asf", clip.actor));

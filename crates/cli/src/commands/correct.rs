@@ -138,12 +138,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     );
     for c in &r.criteria {
-        let op = if c.at_most { "<=" } else { ">=" };
         eprintln!(
-            "  {} {:<15} {:8.3} {op} {:.3}  {}",
+            "  {} {:<15} {:8.3} {} {:.3}  {}",
             if c.passed { "pass" } else { "FAIL" },
             c.name,
             c.value,
+            c.op(),
             c.limit,
             c.meaning
         );
