@@ -250,12 +250,7 @@ async fn augment_poll_and_download_through_the_worker_api() {
 async fn cancellation_reaches_running_jobs_and_events_stream() {
     let app = spawn_app(&[]).await;
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let aug = aug["id"].as_str().unwrap().to_string();
 
     // Follow the augmentation's events while a worker runs and it is cancelled.
@@ -369,11 +364,8 @@ async fn dependent_jobs_wait_for_their_inputs() {
         .await;
     let dataset: Value = r.json().await.unwrap();
     let aug: Value = app
-        .augment(dataset["id"].as_str().unwrap(), &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+        .augment_json(dataset["id"].as_str().unwrap(), &noise_recipe())
+        .await;
     let jobs: Vec<Uuid> = sqlx::query_scalar("SELECT id FROM jobs ORDER BY seq")
         .fetch_all(&app.db)
         .await

@@ -257,12 +257,7 @@ async fn tenants_never_see_each_other() {
         .await
         .unwrap();
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let aug = aug["id"].as_str().unwrap();
     let as_other =
         |m: reqwest::Method, p: String| app.http.request(m, app.url(&p)).bearer_auth(&other);

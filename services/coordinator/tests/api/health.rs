@@ -7,15 +7,7 @@ async fn operational_endpoints_work_without_a_key() {
     let app = spawn_app(&[]).await;
     let r = app.http.get(app.url("/healthz")).send().await.unwrap();
     assert_eq!(r.status(), StatusCode::OK);
-    let ready: Value = app
-        .http
-        .get(app.url("/readyz"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let ready: Value = app.public_json("/readyz").await;
     assert_eq!(ready["database"], "ok");
     assert_eq!(ready["redis"], "ok");
     let metrics = app
@@ -35,15 +27,7 @@ async fn operational_endpoints_work_without_a_key() {
     ] {
         assert!(metrics.contains(name), "metrics lack {name}:\n{metrics}");
     }
-    let openapi: Value = app
-        .http
-        .get(app.url("/openapi.json"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let openapi: Value = app.public_json("/openapi.json").await;
     for path in [
         "/v1/datasets",
         "/v1/datasets/{id}",
@@ -107,23 +91,10 @@ async fn requests_without_a_valid_key_are_refused() {
 async fn works_without_redis() {
     // Nothing listens on port 1: events stay in-process and listeners poll.
     let app = spawn_app(&[("REDIS_URL", "redis://127.0.0.1:1/0")]).await;
-    let ready: Value = app
-        .http
-        .get(app.url("/readyz"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let ready: Value = app.public_json("/readyz").await;
     assert_eq!(ready["redis"], "unreachable");
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let job = app.claim().await.unwrap();
     let output = empty_output();
     let epoch = job["epoch"].as_i64().unwrap();

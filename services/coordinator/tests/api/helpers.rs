@@ -165,6 +165,23 @@ impl TestApp {
             .unwrap()
     }
 
+    /// `GET path` without credentials (operational endpoints), as JSON.
+    pub async fn public_json(&self, path: &str) -> Value {
+        self.http
+            .get(self.url(path))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap()
+    }
+
+    /// [`TestApp::augment`]'s answer as JSON.
+    pub async fn augment_json(&self, dataset: &str, recipe: &Value) -> Value {
+        self.augment(dataset, recipe).await.json().await.unwrap()
+    }
+
     pub async fn claim(&self) -> Option<Value> {
         let r = self
             .worker(reqwest::Method::POST, "/jobs/claim")

@@ -6,12 +6,7 @@ use crate::helpers::*;
 async fn expired_leases_are_reclaimed_and_old_leases_cannot_report() {
     let app = spawn_app(&[("MOTIONAUG_LEASE_MS", "1000")]).await;
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let aug = aug["id"].as_str().unwrap();
     let first = app.claim().await.unwrap();
     let epoch1 = first["epoch"].as_i64().unwrap();
@@ -97,12 +92,7 @@ async fn expired_leases_are_reclaimed_and_old_leases_cannot_report() {
 async fn failures_are_retried_then_kept() {
     let app = spawn_app(&[]).await;
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let aug = aug["id"].as_str().unwrap();
     // Max attempts is 3: two retryable failures go back to the queue, the third is final.
     for attempt in 1..=3 {
@@ -127,12 +117,7 @@ async fn failures_are_retried_then_kept() {
     assert_eq!(status["errors"][0]["clip"], "walk");
     assert!(app.claim().await.is_none());
     // A permanent failure is not retried.
-    let aug2: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug2: Value = app.augment_json(&dataset, &noise_recipe()).await;
     let job = app.claim().await.unwrap();
     let epoch = job["epoch"].as_i64().unwrap();
     let body = json!({"epoch": epoch, "error": "bad input", "retryable": false});

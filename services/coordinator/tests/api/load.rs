@@ -86,12 +86,7 @@ async fn load_test() {
     };
     run(uploads, "upload (1 BVH, 120 frames, 3 joints)", None).await;
     let (dataset, _) = upload_one(&app).await;
-    let aug: Value = app
-        .augment(&dataset, &noise_recipe())
-        .await
-        .json()
-        .await
-        .unwrap();
+    let aug: Value = app.augment_json(&dataset, &noise_recipe()).await;
     run(
         polls,
         "status poll",

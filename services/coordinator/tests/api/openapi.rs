@@ -52,15 +52,7 @@ fn concrete(path: &str) -> String {
 #[tokio::test]
 async fn every_route_and_method_is_in_the_openapi_document() {
     let app = spawn_app(&[]).await;
-    let spec: Value = app
-        .http
-        .get(app.url("/openapi.json"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let spec: Value = app.public_json("/openapi.json").await;
     let documented: BTreeMap<String, BTreeSet<String>> = spec["paths"]
         .as_object()
         .unwrap()
@@ -109,15 +101,7 @@ async fn every_route_and_method_is_in_the_openapi_document() {
 #[tokio::test]
 async fn the_openapi_document_is_complete() {
     let app = spawn_app(&[]).await;
-    let spec: Value = app
-        .http
-        .get(app.url("/openapi.json"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let spec: Value = app.public_json("/openapi.json").await;
     assert_eq!(spec["openapi"], "3.1.0");
     assert_eq!(spec["security"], serde_json::json!([{"apiKey": []}]));
     let schemes = &spec["components"]["securitySchemes"];
