@@ -18,7 +18,7 @@ use physics::{ImitationEnv, Residual};
 use ppo::{Control, PpoConfig, RunLimits, StopReason, Trainer};
 
 use crate::CorrectError;
-use crate::acceptance::{AcceptanceConfig, Criterion, all_passed, judge};
+use crate::acceptance::{AcceptanceConfig, Criterion, SoleStats, all_passed, judge};
 use crate::report::{Report, curve_svg};
 use crate::rollout::{Rollout, deterministic_rollout};
 use crate::task::ImitationTask;
@@ -109,6 +109,10 @@ impl CorrectConfig {
             return bad("eval_every must be at least 1".into());
         }
         self.acceptance.validate()?;
+        let skate = self.physics.skate_scale_m_s;
+        if !(skate.is_finite() && skate >= 0.0) {
+            return bad(format!("skate scale {skate} m/s is not >= 0"));
+        }
         let w = self.physics.sole_reward_weight;
         if !(w.is_finite() && (0.0..=0.9).contains(&w)) {
             return bad(format!("sole reward weight {w} is not in [0, 0.9]"));
@@ -124,9 +128,12 @@ impl CorrectConfig {
 /// `final_scale` of them, linearly over `over_iterations` PPO iterations, so
 /// the policy learns the balance the root force gave. The rollouts that judge
 /// the clip run at the scale reached (`report.json`: `residual_scale`).
-/// `final_scale` 1 keeps MotionAug's gains throughout.
+/// `final_scale` 1 keeps MotionAug's gains throughout. A policy warm-started
+/// from a class tracker ([`crate::class`]) already learnt the balance at the
+/// tracker's final scale: its schedule starts there (`start_scale`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ResidualSchedule {
+    pub start_scale: f32,
     pub final_scale: f32,
     pub over_iterations: u64,
 }
@@ -140,6 +147,7 @@ pub struct ResidualSchedule {
 impl Default for ResidualSchedule {
     fn default() -> Self {
         ResidualSchedule {
+            start_scale: 1.0,
             final_scale: 0.3,
             over_iterations: 40,
         }
@@ -150,30 +158,29 @@ impl ResidualSchedule {
     /// The gain scale after `iterations` PPO iterations.
     pub fn scale(&self, iterations: u64) -> f32 {
         let t = (iterations as f32 / self.over_iterations.max(1) as f32).min(1.0);
-        1.0 - (1.0 - self.final_scale) * t
+        self.start_scale - (self.start_scale - self.final_scale) * t
     }
 
     /// Training environments run at the scale of the iteration to come.
-    fn apply(&self, trainer: &mut Trainer<ImitationTask>) {
+    pub(crate) fn apply(&self, trainer: &mut Trainer<ImitationTask>) {
         let scale = self.scale(trainer.progress().iterations);
         for task in trainer.envs_mut() {
-            task.env.set_residual_scale(scale);
+            task.set_residual_scale(scale);
         }
     }
 
     /// The rollouts that judge the policy run at the scale it was last
     /// trained at.
-    fn judged(&self, trainer: &Trainer<ImitationTask>) -> f32 {
+    pub(crate) fn judged(&self, trainer: &Trainer<ImitationTask>) -> f32 {
         self.scale(trainer.progress().iterations.saturating_sub(1))
     }
 
     fn validate(&self) -> Result<(), CorrectError> {
-        if !(self.final_scale.is_finite() && (0.0..=1.0).contains(&self.final_scale))
-            || self.over_iterations == 0
-        {
+        let unit = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
+        if !unit(self.start_scale) || !unit(self.final_scale) || self.over_iterations == 0 {
             return Err(CorrectError::Config(format!(
-                "residual schedule: final scale {} must be in [0, 1] over at least one iteration",
-                self.final_scale
+                "residual schedule: scales {} -> {} must be in [0, 1] over at least one iteration",
+                self.start_scale, self.final_scale
             )));
         }
         Ok(())
@@ -217,6 +224,12 @@ pub fn correct(
 
     let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
     let before = motion::metrics::plausibility(motion);
+    let acceptance = &config.acceptance;
+    let soles_before = SoleStats::of(
+        &eval_env.reference_foot_contacts(acceptance.sole_tolerance_m as f32),
+        acceptance,
+    )
+    .flat_fraction();
     let action0 = deterministic_rollout(&mut eval_env, |_, a| {
         a.fill(0.0);
         Ok(())
@@ -259,6 +272,7 @@ pub fn correct(
             stop_reason,
             warm_from,
             residual_scale: eval_env.residual_scale(),
+            soles_before,
         },
     );
     write_outputs(out_dir, &final_rollout, &report)?;
@@ -270,7 +284,7 @@ pub fn correct(
 
 /// Creates `out_dir`; its checkpoints folder and whether it holds a
 /// checkpoint, which only `resume` may continue.
-fn prepare_dir(out_dir: &Path, resume: bool) -> Result<(PathBuf, bool), CorrectError> {
+pub(crate) fn prepare_dir(out_dir: &Path, resume: bool) -> Result<(PathBuf, bool), CorrectError> {
     std::fs::create_dir_all(out_dir).map_err(|source| CorrectError::Io {
         path: out_dir.to_path_buf(),
         source,
@@ -347,6 +361,18 @@ fn train(
     if stop_requested() {
         return Err(CorrectError::Stopped);
     }
+    // A warm-started policy (a class tracker, the source clip's) may already
+    // do the clip: judge it before any training.
+    if trainer.progress().iterations == 0 && config.warm_start.is_some() {
+        eval_env.set_residual_scale(schedule.scale(0));
+        let rollout = evaluate(trainer, eval_env)?;
+        if config.target_r_norm.is_some_and(|t| rollout.r_norm() >= t)
+            && accepted(&rollout, before, &config.acceptance)
+        {
+            tracing::info!(r_norm = rollout.r_norm(), "accepted as warm-started");
+            return Ok((StopReason::Callback, Some(rollout)));
+        }
+    }
     let started = Instant::now();
     let reason = trainer.run(&limits, |trainer, it| {
         let mut r_norm = None;
@@ -403,6 +429,7 @@ struct Finish {
     stop_reason: &'static str,
     warm_from: Option<String>,
     residual_scale: f32,
+    soles_before: f64,
 }
 
 /// The report of the final rollout: its figures, every acceptance criterion,
@@ -456,6 +483,7 @@ fn report(
         warm_start: finish.warm_from,
         plausibility_before: before,
         plausibility_after: after,
+        soles_flat_before: Some(finish.soles_before),
     }
 }
 
@@ -523,6 +551,7 @@ mod tests {
     #[test]
     fn the_residual_schedule_lowers_the_gains_linearly_then_holds() {
         let s = ResidualSchedule {
+            start_scale: 1.0,
             final_scale: 0.2,
             over_iterations: 4,
         };
@@ -532,14 +561,28 @@ mod tests {
             assert!((got - want).abs() < 1e-6, "{scales:?}");
         }
         let off = ResidualSchedule {
+            start_scale: 1.0,
             final_scale: 1.0,
             over_iterations: 1,
         };
         assert_eq!(off.scale(1000), 1.0);
+        // A tracker's clips hold the scale it was trained at.
+        let held = ResidualSchedule {
+            start_scale: 0.3,
+            final_scale: 0.3,
+            over_iterations: 40,
+        };
+        assert!((0..50).all(|i| (held.scale(i) - 0.3).abs() < 1e-6));
         let bad = ResidualSchedule {
+            start_scale: 1.0,
             final_scale: 1.5,
             over_iterations: 4,
         };
         assert!(bad.validate().is_err());
+        let bad_start = ResidualSchedule {
+            start_scale: -0.1,
+            ..s
+        };
+        assert!(bad_start.validate().is_err());
     }
 }

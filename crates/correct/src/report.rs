@@ -57,6 +57,11 @@ pub struct Report {
     pub warm_start: Option<String>,
     pub plausibility_before: Plausibility,
     pub plausibility_after: Plausibility,
+    /// The soles criterion measured on the input (the reference's own feet,
+    /// with the character's soles): how often the captured feet themselves
+    /// stand flat where they are planted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub soles_flat_before: Option<f64>,
 }
 
 fn one() -> f64 {

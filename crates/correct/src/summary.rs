@@ -29,9 +29,11 @@ pub struct ClassSummary {
     pub foot_skating_m_s: BeforeAfter,
     pub penetration_mean_m: BeforeAfter,
     pub floating_fraction: BeforeAfter,
-    /// Mean fraction of planted foot frames standing on the sole (after only:
-    /// the input has no simulated feet).
+    /// Mean fraction of planted foot frames standing on the sole, after.
     pub sole_flat_fraction: f64,
+    /// The same on the inputs' own feet (reports that measured it).
+    #[serde(default)]
+    pub sole_flat_fraction_before: Option<f64>,
     /// Mean and total training wall time per clip, seconds.
     pub mean_wall_s: f64,
     pub total_wall_s: f64,
@@ -69,6 +71,10 @@ impl ClassSummary {
             penetration_mean_m: both(&|p| p.penetration_mean_m),
             floating_fraction: both(&|p| p.floating_fraction),
             sole_flat_fraction: mean(&|r| criterion(r, "soles_flat")),
+            sole_flat_fraction_before: {
+                let known: Vec<f64> = reports.iter().filter_map(|r| r.soles_flat_before).collect();
+                (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
+            },
             mean_wall_s: mean(&|r| r.wall_s),
             total_wall_s: reports.iter().map(|r| r.wall_s).sum(),
             mean_samples: mean(&|r| r.samples as f64),
@@ -100,7 +106,7 @@ pub fn to_markdown(rows: &[ClassSummary]) -> String {
             .collect();
         s += &format!(
             "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} -> {:.3} | {:.1} -> {:.1} | \
-             {:.0} -> {:.0} | {:.0} | {:.0} | {:.0} |\n",
+             {:.0} -> {:.0} | {}{:.0} | {:.0} | {:.0} |\n",
             r.class,
             r.clips,
             r.accepted,
@@ -113,6 +119,8 @@ pub fn to_markdown(rows: &[ClassSummary]) -> String {
             r.penetration_mean_m.after * 1000.0,
             r.floating_fraction.before * 100.0,
             r.floating_fraction.after * 100.0,
+            r.sole_flat_fraction_before
+                .map_or(String::new(), |b| format!("{:.0} -> ", b * 100.0)),
             r.sole_flat_fraction * 100.0,
             r.mean_wall_s,
             r.total_wall_s,

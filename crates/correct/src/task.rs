@@ -1,38 +1,109 @@
-//! The bridge between the physics crate and the generic PPO crate: the
-//! imitation environment implements [`ppo::Env`]. Episodes start at a random
-//! phase of the clip (reference state initialisation); a fall terminates (no
-//! bootstrap), the end of the clip truncates (the critic bootstraps).
+//! The bridge between the physics crate and the generic PPO crate: imitation
+//! environments seen as one [`ppo::Env`]. A task holds one clip (a policy for
+//! that clip) or several (a tracker policy for a class, see
+//! [`crate::class`]): each episode picks a clip, with a chance proportional
+//! to its length, and starts at a random phase of it (reference state
+//! initialisation); a fall terminates (no bootstrap), the end of the clip
+//! truncates (the critic bootstraps).
 
 use physics::ImitationEnv;
 use ppo::{EnvRng, StepResult};
+use rand::Rng;
+
+use crate::CorrectError;
 
 pub struct ImitationTask {
-    pub env: ImitationEnv,
+    clips: Vec<ImitationEnv>,
+    /// Cumulative episode lengths of `clips`: the draw of a clip.
+    cumulative: Vec<usize>,
+    current: usize,
 }
 
 impl ImitationTask {
+    /// A task over one clip.
     pub fn new(env: ImitationEnv) -> Self {
-        ImitationTask { env }
+        let cumulative = vec![env.episode_len().max(1)];
+        ImitationTask {
+            clips: vec![env],
+            cumulative,
+            current: 0,
+        }
+    }
+
+    /// A task over several clips, whose characters must have the same
+    /// observation and action sizes (the same body layout).
+    pub fn over(clips: Vec<ImitationEnv>) -> Result<Self, CorrectError> {
+        let Some(first) = clips.first() else {
+            return Err(CorrectError::Config(
+                "a task needs at least one clip".into(),
+            ));
+        };
+        let dims = (first.obs_dim(), first.act_dim());
+        if let Some(i) = clips
+            .iter()
+            .position(|c| (c.obs_dim(), c.act_dim()) != dims)
+        {
+            return Err(CorrectError::Config(format!(
+                "clip {i} has (observation, action) sizes {:?} where clip 0 has {dims:?}: \
+                 one policy needs characters with the same body layout",
+                (clips[i].obs_dim(), clips[i].act_dim())
+            )));
+        }
+        let mut total = 0;
+        let cumulative = clips
+            .iter()
+            .map(|c| {
+                total += c.episode_len().max(1);
+                total
+            })
+            .collect();
+        Ok(ImitationTask {
+            clips,
+            cumulative,
+            current: 0,
+        })
+    }
+
+    /// The environment of the current episode.
+    pub fn env(&self) -> &ImitationEnv {
+        &self.clips[self.current]
+    }
+
+    /// Scale the PD-residual gains of every clip's environment.
+    pub fn set_residual_scale(&mut self, scale: f32) {
+        for env in &mut self.clips {
+            env.set_residual_scale(scale);
+        }
+    }
+
+    fn env_mut(&mut self) -> &mut ImitationEnv {
+        &mut self.clips[self.current]
     }
 }
 
 impl ppo::Env for ImitationTask {
     fn obs_dim(&self) -> usize {
-        self.env.obs_dim()
+        self.env().obs_dim()
     }
 
     fn act_dim(&self) -> usize {
-        self.env.act_dim()
+        self.env().act_dim()
     }
 
     fn reset(&mut self, rng: &mut EnvRng, obs: &mut [f32]) {
-        obs.copy_from_slice(self.env.reset_random(rng));
+        if self.clips.len() > 1 {
+            let total = self.cumulative.last().copied().unwrap_or(1);
+            let draw = rng.random_range(0..total);
+            self.current = self.cumulative.partition_point(|&c| c <= draw);
+        }
+        obs.copy_from_slice(self.env_mut().reset_random(rng));
     }
 
     fn step(&mut self, action: &[f32], obs: &mut [f32]) -> StepResult {
-        match self.env.step(action) {
+        let env = self.env_mut();
+        match env.step(action) {
             Ok(step) => {
-                obs.copy_from_slice(self.env.obs());
+                obs.copy_from_slice(env.obs());
                 StepResult {
                     reward: step.reward,
                     terminated: step.terminated,
@@ -43,7 +114,7 @@ impl ppo::Env for ImitationTask {
             // surface as a failed episode rather than a panic in a worker thread.
             Err(err) => {
                 tracing::error!(%err, "imitation step failed");
-                obs.copy_from_slice(self.env.obs());
+                obs.copy_from_slice(env.obs());
                 StepResult {
                     reward: 0.0,
                     terminated: true,
@@ -54,6 +125,7 @@ impl ppo::Env for ImitationTask {
     }
 
     fn reset_eval(&mut self, obs: &mut [f32]) {
-        obs.copy_from_slice(self.env.reset(0.0));
+        self.current = 0;
+        obs.copy_from_slice(self.env_mut().reset(0.0));
     }
 }

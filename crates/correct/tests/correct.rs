@@ -216,3 +216,88 @@ fn a_stop_request_ends_training_with_a_checkpoint() {
         "a stopped job reports nothing"
     );
 }
+
+fn jog() -> Motion {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    load(
+        data.join("HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"),
+        &LoadOptions {
+            skeleton: Some(data.join("HDM_bd.asf")),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
+    let clips = vec![("kick".to_string(), kick()), ("jog".to_string(), jog())];
+    let dir = tempfile::tempdir().unwrap();
+    let class_dir = dir.path().join("tracker");
+    let mut config = correct::ClassConfig {
+        correct: tiny(3),
+        judge_every: 2,
+    };
+    config.correct.physics.tracker_frames = 2;
+
+    // A tracker must see the clip ahead.
+    let mut blind = config.clone();
+    blind.correct.physics.tracker_frames = 0;
+    assert!(correct::train_class(&clips, &blind, &class_dir, false, |_| {}).is_err());
+
+    let mut judged = Vec::new();
+    let report = correct::train_class(&clips, &config, &class_dir, false, |p| {
+        judged.extend(p.accepted.map(|a| (p.iteration, a)));
+    })
+    .unwrap();
+    assert_eq!(report.clips, 2);
+    assert_eq!(report.iterations, 3);
+    assert_eq!(report.verdicts.len(), 2);
+    assert_eq!(judged.len(), 1, "judged at iteration 2: {judged:?}");
+    // Judged at iteration 2 and again at the end.
+    let its: Vec<u64> = report.curve.iter().map(|p| p.iteration).collect();
+    assert_eq!(its, vec![2, 3]);
+    for v in &report.verdicts {
+        assert_eq!(v.accepted, v.rejected_because.is_empty(), "{v:?}");
+        assert!((0.0..=1.0).contains(&v.r_norm));
+    }
+    let read = correct::ClassReport::read(&class_dir.join(correct::class::REPORT_FILE)).unwrap();
+    assert_eq!(read.verdicts.len(), 2);
+    // The schedule had lowered the gains; the tracker keeps that scale.
+    assert!(read.residual_scale < 1.0);
+
+    // A clip's correction from the tracker: its observation, checkpoint and
+    // residual scale.
+    let warm = report.warm_config(&tiny(1), &class_dir);
+    assert_eq!(warm.physics.tracker_frames, 2);
+    assert_eq!(
+        warm.residual_schedule.start_scale,
+        warm.residual_schedule.final_scale
+    );
+    let out = correct(
+        &kick(),
+        "kick",
+        &warm,
+        &dir.path().join("kick"),
+        false,
+        |_| {},
+    )
+    .unwrap();
+    assert!(out.report.warm_start.is_some());
+    assert!((out.report.residual_scale - report.residual_scale).abs() < 1e-6);
+
+    // A per-clip policy (no tracker observation) cannot start from it.
+    let mut wrong = warm.clone();
+    wrong.physics.tracker_frames = 0;
+    assert!(
+        correct(
+            &kick(),
+            "kick",
+            &wrong,
+            &dir.path().join("wrong"),
+            false,
+            |_| {}
+        )
+        .is_err()
+    );
+}

@@ -14,6 +14,10 @@
 //! * **Observation** (heading frame of the root): phase, root height, then per
 //!   body position relative to the root, orientation (6D: first two columns of
 //!   the rotation matrix), linear and angular velocity: `2 + 15 * bodies`.
+//!   With [`Config::tracker_frames`] K > 0 (a *tracker*, one policy for many
+//!   clips), the phase is 0 and K upcoming reference frames follow, each per
+//!   body its position relative to the simulated root and orientation (6D),
+//!   in the simulated root's heading frame: `2 + 15 * bodies + 9 * K * bodies`.
 //! * **Reward**: `r_imit = 0.5 exp(-2 E_pose) + 0.2 exp(-0.005 E_vel) +
 //!   0.2 exp(-5 E_ee) + 0.1 exp(-100 E_com)`, `r = 0.9 r_imit + 0.1 r_res`,
 //!   `r_res = exp(-0.01 |[F; tau]|)` (1 without residual force). Both are 0 on
@@ -93,11 +97,21 @@ pub struct Config {
     pub sole_reward_weight: f32,
     /// Height scale of the sole reward, m.
     pub sole_scale_m: f32,
+    /// Speed scale of the sliding term of the sole reward, m/s (0: off): a
+    /// touching foot's sole midpoint moving horizontally at `v` adds
+    /// `(v / skate_scale_m_s)^2` to the exponent, so planted feet learn to stay put
+    /// (acceptance judges foot skating).
+    pub skate_scale_m_s: f32,
     /// Recompute the PD-residual force at every physics step instead of once
     /// per control step (the reference computes it once per policy step).
     pub residual_every_substep: bool,
     /// Where [`ImitationEnv::recorded_motion`] puts the simulated floor.
     pub output_frame: OutputFrame,
+    /// Upcoming reference frames in the observation (0: a policy for one
+    /// clip, which sees the clip's phase instead). A policy that sees what
+    /// it must do next can track clips it was not trained on: one policy per
+    /// class of motions (`correct::class`).
+    pub tracker_frames: usize,
 }
 
 /// The vertical frame of the recorded motion.
@@ -125,8 +139,10 @@ impl Default for Config {
             contact_tolerance: 0.1,
             sole_reward_weight: 0.2,
             sole_scale_m: 0.02,
+            skate_scale_m_s: 0.0,
             residual_every_substep: false,
             output_frame: OutputFrame::Ground,
+            tracker_frames: 0,
         }
     }
 }
@@ -295,7 +311,7 @@ impl ImitationEnv {
             sim,
             substeps,
             frame: 0,
-            obs: vec![0.0; 2 + 15 * n],
+            obs: vec![0.0; 2 + 15 * n + 9 * config.tracker_frames * n],
             targets: vec![Quat::IDENTITY; n],
             target_vel: vec![Vec3::ZERO; n],
             action_rot: vec![Quat::IDENTITY; n],
@@ -615,21 +631,37 @@ impl ImitationEnv {
     }
 
     /// `exp(-sum (h_heel^2 + h_toe^2) / scale^2)` over the feet touching the
-    /// ground (heights above the floor, 0 below it); 1 when none touches. A
-    /// foot that is not a box counts its centre as heel and toe.
+    /// ground (heights above the floor, 0 below it), plus `(v / skate_scale)^2`
+    /// per touching foot sliding at `v` when the sliding term is on; 1 when
+    /// none touches. A foot that is not a box counts its centre as heel and toe.
     fn sole_reward(&self) -> f32 {
+        let scale = self.config.sole_scale_m.max(1e-4);
+        let skate = self.config.skate_scale_m_s;
         let mut e = 0.0;
         for &b in &self.spec.feet {
             if !self.sim.touches_ground(b) {
                 continue;
             }
-            for p in self.sole_world(b) {
+            let points = self.sole_world(b);
+            for p in points {
                 let h = p.y.max(0.0);
-                e += h * h;
+                e += h * h / (scale * scale);
+            }
+            if skate > 0.0 {
+                let v = self.sole_speed(b, points);
+                e += (v / skate) * (v / skate);
             }
         }
-        let scale = self.config.sole_scale_m.max(1e-4);
-        (-e / (scale * scale)).exp()
+        (-e).exp()
+    }
+
+    /// Horizontal speed of the midpoint of foot `b`'s sole `points`, m/s.
+    #[inline]
+    fn sole_speed(&self, b: usize, [heel, toe]: [Vec3; 2]) -> f32 {
+        let s = self.sim.state[b];
+        let mid = 0.5 * (heel + toe);
+        let v = s.vel + s.angvel.cross(mid - s.pos);
+        Vec3::new(v.x, 0.0, v.z).length()
     }
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.
@@ -697,8 +729,13 @@ impl ImitationEnv {
         let root = s[0];
         let h = heading_of(root.rot, self.spec.forward, self.heading0).inverse();
         let last = (self.reference.len() - 1).max(1);
+        let tracker = self.config.tracker_frames;
         let o = &mut self.obs;
-        o[0] = self.frame as f32 / last as f32;
+        o[0] = if tracker > 0 {
+            0.0
+        } else {
+            self.frame as f32 / last as f32
+        };
         o[1] = root.pos.y;
         let mut i = 2;
         for st in s.iter() {
@@ -712,6 +749,19 @@ impl ImitationEnv {
             ];
             o[i..i + 15].copy_from_slice(&vals);
             i += 15;
+        }
+        for ahead in 1..=tracker {
+            let k = (self.frame + ahead).min(self.reference.len() - 1);
+            for r in &self.reference.frames[k].bodies {
+                let p = h * (r.pos - root.pos);
+                let m = Mat3::from_quat(h * r.rot);
+                let vals = [
+                    p.x, p.y, p.z, m.x_axis.x, m.x_axis.y, m.x_axis.z, m.y_axis.x, m.y_axis.y,
+                    m.y_axis.z,
+                ];
+                o[i..i + 9].copy_from_slice(&vals);
+                i += 9;
+            }
         }
     }
 
@@ -841,20 +891,50 @@ impl ImitationEnv {
         local.map(|p| s.pos + s.rot * p)
     }
 
+    /// How each foot of the *reference* meets the floor at every frame after
+    /// the first (the frames [`ImitationEnv::foot_contacts`] is read at in a
+    /// whole-clip rollout), with the character's own sole points: the input's
+    /// side of the soles criterion. A reference foot touches the floor when
+    /// the lower of its heel and toe is within `touch_m` of it.
+    pub fn reference_foot_contacts(&self, touch_m: f32) -> Vec<Vec<FootContact>> {
+        self.reference.frames[1..]
+            .iter()
+            .map(|frame| {
+                self.spec
+                    .feet
+                    .iter()
+                    .map(|&b| {
+                        let s = frame.bodies[b];
+                        let local = self.spec.sole_points(b).unwrap_or_else(|| {
+                            let c = self.spec.bodies[b].com_local;
+                            [c, c]
+                        });
+                        let [heel, toe] = local.map(|p| s.pos + s.rot * p);
+                        let mid = 0.5 * (heel + toe);
+                        let v = s.vel + s.angvel.cross(mid - s.pos);
+                        FootContact {
+                            heel_m: heel.y,
+                            toe_m: toe.y,
+                            speed_m_s: Vec3::new(v.x, 0.0, v.z).length(),
+                            touching: heel.y.min(toe.y) <= touch_m,
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// How each foot (in [`CharacterSpec::feet`] order) meets the floor now.
     pub fn foot_contacts(&self) -> Vec<FootContact> {
         self.spec
             .feet
             .iter()
             .map(|&b| {
-                let s = self.sim.state[b];
                 let [heel, toe] = self.sole_world(b);
-                let mid = 0.5 * (heel + toe);
-                let v = s.vel + s.angvel.cross(mid - s.pos);
                 FootContact {
                     heel_m: heel.y,
                     toe_m: toe.y,
-                    speed_m_s: Vec3::new(v.x, 0.0, v.z).length(),
+                    speed_m_s: self.sole_speed(b, [heel, toe]),
                     touching: self.sim.touches_ground(b),
                 }
             })

@@ -407,3 +407,49 @@ fn residual_scale_scales_the_root_force() {
     env.set_residual_scale(f32::NAN);
     assert_eq!(env.residual_scale(), 1.0);
 }
+
+#[test]
+fn a_tracker_sees_the_upcoming_reference_frames_not_the_phase() {
+    let motion = sway(cmu_humanoid(), 2.0, 120.0);
+    let plain = ImitationEnv::new(&motion, &Config::default()).unwrap();
+    let config = Config {
+        tracker_frames: 2,
+        ..Config::default()
+    };
+    let mut env = ImitationEnv::new(&motion, &config).unwrap();
+    let n = env.spec().bodies.len();
+    assert_eq!(plain.obs_dim(), 2 + 15 * n);
+    assert_eq!(env.obs_dim(), plain.obs_dim() + 2 * 9 * n);
+
+    env.reset(0.5);
+    let k = env.frame();
+    assert!(k > 0);
+    let obs = env.obs().to_vec();
+    assert_eq!(obs[0], 0.0, "no phase for a tracker");
+    let root = env.body_states()[0];
+    for ahead in 1..=2 {
+        let start = 2 + 15 * n + (ahead - 1) * 9 * n;
+        let reference = &env.reference().frames[k + ahead].bodies;
+        for (b, r) in reference.iter().enumerate() {
+            let block = &obs[start + 9 * b..start + 9 * b + 9];
+            // Position relative to the simulated root, turned to its heading:
+            // the distance is kept, and the height difference too.
+            let d = r.pos - root.pos;
+            let p = glam::Vec3::new(block[0], block[1], block[2]);
+            assert!(
+                (p.length() - d.length()).abs() < 1e-4,
+                "body {b} at +{ahead}"
+            );
+            assert!((p.y - d.y).abs() < 1e-4);
+            // Orientation as two unit columns.
+            let c0 = glam::Vec3::new(block[3], block[4], block[5]);
+            let c1 = glam::Vec3::new(block[6], block[7], block[8]);
+            assert!((c0.length() - 1.0).abs() < 1e-4 && (c1.length() - 1.0).abs() < 1e-4);
+            assert!(c0.dot(c1).abs() < 1e-4);
+        }
+    }
+    // The frames differ as the reference moves on: the sway is not static.
+    let step = env.step(&vec![0.0; env.act_dim()]).unwrap();
+    assert!(!step.done);
+    assert_ne!(env.obs()[2 + 15 * n..], obs[2 + 15 * n..]);
+}

@@ -97,6 +97,8 @@ pub trait Inputs {
     fn corrected_original(&self, name: &str) -> Result<Option<Motion>, PipelineError>;
     /// The debiasing network `debias_train` made.
     fn debiaser(&self) -> Result<Arc<debias::Debiaser>, PipelineError>;
+    /// The folder of class `group`'s tracker (`class.json`, `checkpoints/`).
+    fn tracker(&self, group: &str) -> Result<PathBuf, PipelineError>;
 }
 
 /// What a job made.
@@ -118,6 +120,12 @@ pub enum Made {
     },
     /// The debiasing network (`debias_train`), also saved in the job's folder.
     Debiaser(debias::Debiaser),
+    /// A class tracker (`tracker`): its report; `class.json` and its
+    /// checkpoints are in the job's folder.
+    Tracker {
+        group: String,
+        report: correct::ClassReport,
+    },
 }
 
 /// Where a job's results go, one at a time.
@@ -185,10 +193,11 @@ impl<'a> Context<'a> {
 }
 
 /// The folder of a job's own files under the in-process runner's `work`
-/// folder: `originals/<clip>`, `correct/<clip>`, `debias`; `None` for kinds
-/// that keep nothing.
+/// folder: `trackers/<group>`, `originals/<clip>`, `correct/<clip>`, `debias`;
+/// `None` for kinds that keep nothing.
 pub fn job_dir(work: &Path, job: &PlannedJob) -> Option<PathBuf> {
     match &job.kind {
+        JobKind::Tracker { group, .. } => Some(work.join("trackers").join(group)),
         JobKind::CorrectOriginal { clip, .. } => Some(work.join("originals").join(clip)),
         JobKind::Correct { clip, .. } => Some(work.join("correct").join(clip)),
         JobKind::DebiasTrain { .. } => Some(work.join("debias")),
@@ -255,9 +264,50 @@ pub fn execute(
             let made = stages::interaction(step, *op_index, pair, &a, &b, *seed)?;
             put_all(out, made, ctx)
         }
-        JobKind::CorrectOriginal { clip, seed, step } => {
+        JobKind::Tracker {
+            group,
+            clips,
+            seed,
+            step,
+        } => {
+            let clips = clips
+                .iter()
+                .map(|n| Ok((n.clone(), inputs.source(n)?.motion)))
+                .collect::<Result<Vec<_>, PipelineError>>()?;
+            let mut config = step.tracker_config(*seed);
+            if let Some(every) = ctx.checkpoint_every_s {
+                config.correct.checkpoint_every_s = every;
+            }
+            config.correct.stop = ctx.stop.clone();
+            if let Some(tune) = ctx.tune_correction {
+                tune(&mut config.correct);
+            }
+            let report =
+                stages::train_tracker(&config, &clips, ctx.dir, ctx.on_progress).map_err(|e| {
+                    match e {
+                        PipelineError::Correct(correct::CorrectError::Stopped) => {
+                            PipelineError::Stopped
+                        }
+                        other => other,
+                    }
+                })?;
+            out.put(Made::Tracker {
+                group: group.clone(),
+                report,
+            })
+        }
+        JobKind::CorrectOriginal {
+            clip,
+            seed,
+            step,
+            tracker,
+        } => {
             let source = inputs.source(clip)?;
-            let outcome = correction(ctx, step, *seed, clip, &source.motion, None)?;
+            let warm = match tracker {
+                Some(group) => Warm::Tracker(inputs.tracker(group)?),
+                None => Warm::None,
+            };
+            let outcome = correction(ctx, step, *seed, clip, &source.motion, warm)?;
             out.put(Made::Original {
                 clip: clip.clone(),
                 outcome,
@@ -265,6 +315,7 @@ pub fn execute(
         }
         JobKind::Correct {
             clip,
+            tracker,
             sources,
             seed,
             step,
@@ -272,15 +323,20 @@ pub fn execute(
             let made = inputs
                 .clip(clip)?
                 .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not made")))?;
-            let outcomes = sources
-                .iter()
-                .map(|s| inputs.original_report(s).map(|r| (r.accepted, r.r_norm)))
-                .collect::<Result<Vec<_>, _>>()?;
-            let warm = match stages::best_warm_start(&outcomes) {
-                Some(i) => Some(inputs.original_checkpoints(&sources[i])?),
-                None => None,
+            let warm = match tracker {
+                Some(group) => Warm::Tracker(inputs.tracker(group)?),
+                None => {
+                    let outcomes = sources
+                        .iter()
+                        .map(|s| inputs.original_report(s).map(|r| (r.accepted, r.r_norm)))
+                        .collect::<Result<Vec<_>, _>>()?;
+                    match stages::best_warm_start(&outcomes) {
+                        Some(i) => Warm::Checkpoints(inputs.original_checkpoints(&sources[i])?),
+                        None => Warm::None,
+                    }
+                }
             };
-            let outcome = correction(ctx, step, *seed, clip, &made.motion, warm.as_deref())?;
+            let outcome = correction(ctx, step, *seed, clip, &made.motion, warm)?;
             let summary = CorrectionSummary::new(&outcome.report, ctx.report_path.clone());
             if !outcome.report.accepted && !step.keep_rejected {
                 tracing::info!(clip, "correction not accepted; the clip is left out");
@@ -339,6 +395,17 @@ fn put_all(out: &mut dyn Outputs, made: Vec<NewClip>, ctx: &Context) -> Result<(
     Ok(())
 }
 
+/// Where a correction's policy starts.
+enum Warm {
+    /// From scratch.
+    None,
+    /// From another correction's checkpoints (the source clip's).
+    Checkpoints(PathBuf),
+    /// From the class tracker in this folder, with its observation and
+    /// residual scale.
+    Tracker(PathBuf),
+}
+
 /// A correction in the job's folder with the job's settings and the context's changes.
 fn correction(
     ctx: &Context,
@@ -346,7 +413,7 @@ fn correction(
     seed: u64,
     name: &str,
     motion: &Motion,
-    warm_start: Option<&Path>,
+    warm: Warm,
 ) -> Result<correct::Outcome, PipelineError> {
     let mut config = step.config(seed);
     if let Some(every) = ctx.checkpoint_every_s {
@@ -356,12 +423,27 @@ fn correction(
     if let Some(tune) = ctx.tune_correction {
         tune(&mut config);
     }
-    let outcome =
-        stages::correct_with_config(config, name, motion, ctx.dir, warm_start, ctx.on_progress)
-            .map_err(|e| match e {
-                PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
-                other => other,
-            })?;
+    let warm_start = match warm {
+        Warm::None => None,
+        Warm::Checkpoints(dir) => Some(dir),
+        Warm::Tracker(dir) => {
+            let report = correct::ClassReport::read(&dir.join(correct::class::REPORT_FILE))?;
+            config = report.warm_config(&config, &dir);
+            Some(correct::class::checkpoints_of(&dir))
+        }
+    };
+    let outcome = stages::correct_with_config(
+        config,
+        name,
+        motion,
+        ctx.dir,
+        warm_start.as_deref(),
+        ctx.on_progress,
+    )
+    .map_err(|e| match e {
+        PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
+        other => other,
+    })?;
     (ctx.on_corrected)(&outcome);
     Ok(outcome)
 }

@@ -17,7 +17,7 @@ pub use codec::{decode_clip, encode_clip};
 pub use exec::{Context, Inputs, Made, Outputs, WorkClip, execute};
 pub use manifest::{CorrectionSummary, ManifestEntry};
 pub use plan::{JobKind, Plan, PlannedJob, corrections, plan};
-pub use recipe::{CorrectStep, InteractionStep, Recipe, ResidualKind, VaeStep};
+pub use recipe::{CorrectStep, InteractionStep, PolicyKind, Recipe, ResidualKind, VaeStep};
 pub use run::{Clip, Event, Options, Output, Summary, Tune, run, run_plan};
 
 #[derive(Debug, thiserror::Error)]

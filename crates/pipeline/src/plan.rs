@@ -12,12 +12,18 @@
 //! * `synthesize` (one per clip: every kinematic output of it): the source clip.
 //! * `vae` (one per class): the class's clips; trains, then samples `copies` clips.
 //! * `interaction` (one per pair `<stem>_A` / `<stem>_B`): both clips.
-//! * `correct_original` (one per source clip, when `[correct]` warm-starts or
-//!   `[debias]` is on): the source clip.
+//! * `tracker` (one per class, with `[correct] policy = "class"`): the
+//!   class's clips; trains the class tracker every correction of the class
+//!   starts from (`correct::class`).
+//! * `correct_original` (one per source clip, when `[correct]` warm-starts
+//!   with one policy per clip, or `[debias]` is on): the source clip, and its
+//!   class's `tracker` with `policy = "class"`.
 //! * `correct` (one per new clip, except interaction outputs: two partners are
-//!   not simulated together): the job that made the clip, and with warm start
-//!   the corrections of the clips it was made from (its source clip; every
-//!   clip of the class for a VAE sample), the best of which warm-starts it.
+//!   not simulated together): the job that made the clip; with
+//!   `policy = "class"` the tracker of the class of the first clip it was
+//!   made from; else with warm start the corrections of the clips it was made
+//!   from (its source clip; every clip of the class for a VAE sample), the
+//!   best of which warm-starts it.
 //! * `debias_train`: every `correct_original`.
 //! * `debias_apply` (one per corrected clip): its `correct` and `debias_train`.
 
@@ -25,7 +31,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::recipe::{CorrectStep, GroupBy, InteractionStep, Recipe, VaeStep};
+use crate::recipe::{CorrectStep, GroupBy, InteractionStep, PolicyKind, Recipe, VaeStep};
 
 /// What one job does, with the settings it runs with.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -55,13 +61,27 @@ pub enum JobKind {
         step: InteractionStep,
         op_index: usize,
     },
+    /// One tracker policy for the clips of a class (`policy = "class"`).
+    Tracker {
+        group: String,
+        clips: Vec<String>,
+        seed: u64,
+        step: CorrectStep,
+    },
     CorrectOriginal {
         clip: String,
         seed: u64,
         step: CorrectStep,
+        /// The class tracker it starts from (`policy = "class"`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tracker: Option<String>,
     },
     Correct {
         clip: String,
+        /// The class tracker it starts from (`policy = "class"`; then
+        /// `sources` is empty).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tracker: Option<String>,
         /// Originals whose corrected policy may warm-start this one (with
         /// `[correct] warm_start`): the clip a variant was made from, or every
         /// clip of a VAE sample's class; the executor takes the best corrected
@@ -85,6 +105,7 @@ impl JobKind {
             JobKind::Synthesize { .. } => "synthesize",
             JobKind::Vae { .. } => "vae",
             JobKind::Interaction { .. } => "interaction",
+            JobKind::Tracker { .. } => "tracker",
             JobKind::CorrectOriginal { .. } => "correct_original",
             JobKind::Correct { .. } => "correct",
             JobKind::DebiasTrain { .. } => "debias_train",
@@ -98,7 +119,9 @@ impl JobKind {
             JobKind::Synthesize { clip, .. } | JobKind::CorrectOriginal { clip, .. } => {
                 vec![clip]
             }
-            JobKind::Vae { clips, .. } => clips.iter().map(String::as_str).collect(),
+            JobKind::Vae { clips, .. } | JobKind::Tracker { clips, .. } => {
+                clips.iter().map(String::as_str).collect()
+            }
             JobKind::Interaction { a, b, .. } => vec![a, b],
             JobKind::DebiasTrain { originals, .. } => {
                 originals.iter().map(String::as_str).collect()
@@ -115,7 +138,7 @@ impl JobKind {
             | JobKind::Correct { clip, .. }
             | JobKind::DebiasApply { clip } => Some(clip),
             JobKind::Interaction { a, .. } => Some(a),
-            JobKind::Vae { .. } | JobKind::DebiasTrain { .. } => None,
+            JobKind::Vae { .. } | JobKind::Tracker { .. } | JobKind::DebiasTrain { .. } => None,
         }
     }
 }
@@ -319,8 +342,9 @@ impl Graph {
         }
     }
 
-    /// The corrected originals (when warm start or debiasing needs them), a
-    /// `correct` job per correctable new clip, and the debiasing jobs.
+    /// The class trackers (`policy = "class"`), the corrected originals
+    /// (when warm start or debiasing needs them), a `correct` job per
+    /// correctable new clip, and the debiasing jobs.
     fn correct(
         &mut self,
         c: &CorrectStep,
@@ -328,12 +352,18 @@ impl Graph {
         names: &[String],
         seed: u64,
     ) {
-        if c.warm_start || debias.is_some() {
-            for clip in names {
-                let key = format!("correct_original:{clip}");
+        let by_class = c.policy == PolicyKind::Class;
+        if by_class {
+            let mut groups: BTreeMap<String, Vec<String>> = BTreeMap::new();
+            for name in names {
+                groups.entry(class_of(name)).or_default().push(name.clone());
+            }
+            for (group, clips) in groups {
+                let key = tracker_key(&group);
                 self.jobs.push(PlannedJob {
-                    kind: JobKind::CorrectOriginal {
-                        clip: clip.clone(),
+                    kind: JobKind::Tracker {
+                        group,
+                        clips,
                         seed: job_seed(seed, &key),
                         step: c.clone(),
                     },
@@ -344,19 +374,41 @@ impl Graph {
                 });
             }
         }
+        let tracker_of = |clip: &str| by_class.then(|| class_of(clip));
+        if (c.warm_start && !by_class) || debias.is_some() {
+            for clip in names {
+                let key = format!("correct_original:{clip}");
+                let tracker = tracker_of(clip);
+                self.jobs.push(PlannedJob {
+                    kind: JobKind::CorrectOriginal {
+                        clip: clip.clone(),
+                        seed: job_seed(seed, &key),
+                        step: c.clone(),
+                        tracker: tracker.clone(),
+                    },
+                    key,
+                    deps: tracker.iter().map(|g| tracker_key(g)).collect(),
+                    outputs: vec![],
+                    finishes: false,
+                });
+            }
+        }
         let mut corrected = Vec::new();
         for clip in self.new_clips.iter().filter(|n| n.correctable) {
             let key = format!("correct:{}", clip.name);
-            let sources = if c.warm_start {
+            let tracker = clip.sources.first().and_then(|s| tracker_of(s));
+            let sources = if c.warm_start && tracker.is_none() {
                 clip.sources.clone()
             } else {
                 vec![]
             };
             let mut deps = vec![clip.producer.clone()];
+            deps.extend(tracker.iter().map(|g| tracker_key(g)));
             deps.extend(sources.iter().map(|s| format!("correct_original:{s}")));
             self.jobs.push(PlannedJob {
                 kind: JobKind::Correct {
                     clip: clip.name.clone(),
+                    tracker,
                     sources,
                     seed: job_seed(seed, &key),
                     step: c.clone(),
@@ -372,6 +424,11 @@ impl Graph {
             self.jobs.extend(debias_jobs(names, config, corrected));
         }
     }
+}
+
+/// The key of the tracker job of class `group`.
+pub fn tracker_key(group: &str) -> String {
+    format!("tracker:{group}")
 }
 
 /// `debias_train` on the corrected `originals`, then a `debias_apply` per
@@ -445,6 +502,7 @@ pub fn corrections(
                 clip: clip.clone(),
                 seed: seed_of(clip),
                 step: step.clone(),
+                tracker: None,
             },
             deps: vec![],
             outputs: vec![],
@@ -457,6 +515,7 @@ pub fn corrections(
             key: format!("correct:{clip}"),
             kind: JobKind::Correct {
                 clip: clip.clone(),
+                tracker: None,
                 sources: originals.to_vec(),
                 seed: seed_of(clip),
                 step: step.clone(),

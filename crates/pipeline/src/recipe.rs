@@ -29,6 +29,8 @@
 //! max_foot_skating_m_s = 0.1      # skating at most,
 //! skating_at_most_input = true    # and at most the input's,
 //! min_sole_flat_fraction = 0.9    # planted frames on the sole at least
+//! policy = "clip"           # clip (one policy per clip) | class (one tracker per class first)
+//! tracker_budget_s = 1800   # with policy = "class": each class tracker's budget
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
@@ -143,10 +145,30 @@ pub struct CorrectStep {
     pub min_sole_flat_fraction: f64,
     /// Keep clips whose correction was not accepted (marked in the manifest).
     pub keep_rejected: bool,
-    /// Correct each original first and start its variants from its policy.
+    /// Correct each original first and start its variants from its policy
+    /// (with `policy = "clip"`).
     pub warm_start: bool,
     /// Parallel simulated environments per clip.
     pub envs: usize,
+    /// Which policy corrects a clip: `clip`, one trained for that clip (from
+    /// scratch, or from its source's with `warm_start`); `class`, one tracker
+    /// per class trained on the class's originals first, every correction of
+    /// the class starting from it (`correct::class`: judged as is, fine-tuned
+    /// only when it does not pass).
+    pub policy: PolicyKind,
+    /// Training budget of each class tracker, seconds (`policy = "class"`).
+    pub tracker_budget_s: f64,
+    /// Upcoming reference frames a class tracker sees.
+    pub tracker_frames: usize,
+}
+
+/// See [`CorrectStep::policy`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PolicyKind {
+    #[default]
+    Clip,
+    Class,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -182,6 +204,12 @@ impl Default for CorrectStep {
             keep_rejected: false,
             warm_start: true,
             envs: c.envs,
+            policy: PolicyKind::Clip,
+            tracker_budget_s: 1800.0,
+            tracker_frames: correct::ClassConfig::default()
+                .correct
+                .physics
+                .tracker_frames,
         }
     }
 }
@@ -205,6 +233,18 @@ impl CorrectStep {
             ..correct::CorrectConfig::default()
         };
         c.physics.residual = self.residual.physics();
+        c
+    }
+
+    /// The class tracker's settings (`policy = "class"`): the clips' settings
+    /// with the tracker's budget and observation.
+    pub fn tracker_config(&self, seed: u64) -> correct::ClassConfig {
+        let mut c = correct::ClassConfig {
+            correct: self.config(seed),
+            ..correct::ClassConfig::default()
+        };
+        c.correct.time_budget_s = self.tracker_budget_s;
+        c.correct.physics.tracker_frames = self.tracker_frames;
         c
     }
 }
@@ -395,6 +435,17 @@ impl Recipe {
             c.config(0)
                 .validate()
                 .map_err(|e| err("[correct]", e.to_string()))?;
+            if c.policy == PolicyKind::Class {
+                if !(c.tracker_budget_s.is_finite() && c.tracker_budget_s >= 0.0) {
+                    return Err(err(
+                        "[correct]",
+                        "`tracker_budget_s` must be a duration in seconds",
+                    ));
+                }
+                if !(1..=8).contains(&c.tracker_frames) {
+                    return Err(err("[correct]", "`tracker_frames` must be in 1..=8"));
+                }
+            }
         }
         if let Some(d) = &self.debias {
             d.validate().map_err(|e| err("[debias]", e.to_string()))?;

@@ -340,6 +340,13 @@ impl<'a> State<'a> {
                     self.originals.insert(clip, outcome);
                 }
                 Made::Debiaser(model) => self.debiaser = Some(Arc::new(model)),
+                // Its folder holds it for the corrections that start from it.
+                Made::Tracker { group, report } => tracing::info!(
+                    group,
+                    accepted = report.accepted(),
+                    clips = report.clips,
+                    "class tracker ready"
+                ),
             }
         }
         Ok(())
@@ -410,6 +417,17 @@ impl Inputs for State<'_> {
         self.debiaser
             .clone()
             .ok_or_else(|| PipelineError::Job("no debiasing model".into()))
+    }
+
+    fn tracker(&self, group: &str) -> Result<PathBuf, PipelineError> {
+        let dir = self.options.work.join("trackers").join(group);
+        if dir.join(correct::class::REPORT_FILE).is_file() {
+            Ok(dir)
+        } else {
+            Err(PipelineError::Job(format!(
+                "the tracker of class `{group}` was not trained"
+            )))
+        }
     }
 }
 

@@ -247,6 +247,35 @@ pub fn finished_correction(
     }))
 }
 
+/// `tracker`: train the class tracker on `clips` in `dir` (`class.json`,
+/// `checkpoints/`). A finished tracker in `dir` is reused; an interrupted one
+/// resumed from its checkpoint.
+pub fn train_tracker(
+    config: &correct::ClassConfig,
+    clips: &[(String, Motion)],
+    dir: &Path,
+    on_progress: &(dyn Fn(&correct::job::ProgressEvent) + Sync),
+) -> Result<correct::ClassReport, PipelineError> {
+    let done = dir.join(correct::class::REPORT_FILE);
+    if done.is_file() {
+        tracing::info!(dir = %dir.display(), "class tracker already trained; reused");
+        return Ok(correct::ClassReport::read(&done)?);
+    }
+    let resume = ppo::latest_checkpoint(&correct::class::checkpoints_of(dir))
+        .map_err(correct::CorrectError::from)?
+        .is_some();
+    Ok(correct::train_class(clips, config, dir, resume, |p| {
+        on_progress(&correct::job::ProgressEvent {
+            iteration: p.iteration,
+            samples: p.samples,
+            wall_s: p.wall_s,
+            budget_s: p.budget_s,
+            mean_reward: p.mean_reward,
+            r_norm: None,
+        })
+    })?)
+}
+
 /// `debias_train`: fit the debiasing network on (corrected original, original)
 /// pairs. Callers pass only accepted corrections (a fall is not a bias).
 pub fn debias_train(

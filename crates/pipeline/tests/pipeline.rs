@@ -294,7 +294,16 @@ fn correction_and_debiasing_run_in_process_and_survive_a_rerun() {
     assert_eq!(summary.manifest.len(), 2);
     for e in &summary.manifest {
         let c = e.correction.as_ref().expect("correction summary");
-        assert!(c.accepted && c.samples > 0, "{c:?}");
+        assert!(c.accepted, "{c:?}");
+        // Trained, or accepted as the original's policy left it (a
+        // warm-started policy is judged before any training).
+        let report = correct::Report::read(&out.join(c.report.as_ref().expect("report path")))
+            .expect("report");
+        assert!(
+            report.samples > 0 || report.warm_start.is_some(),
+            "{report:?}"
+        );
+        assert_eq!(c.samples, report.samples);
         assert!(e.debiased);
         assert_eq!(e.synth.fps, 30.0, "corrected clips are at the control rate");
         let bvh = out.join(&e.synth.file);
@@ -420,5 +429,128 @@ fn vae_table_trains_per_class_and_samples() {
         assert_eq!(o.entry.synth.op, "vae");
         assert_eq!(o.motion.joints(), clips[0].motion.joints());
         assert!(o.motion.frames() > 1);
+    }
+}
+
+#[test]
+fn with_class_trackers_every_correction_starts_from_its_class_tracker() {
+    let recipe = Recipe::from_toml_str(
+        r#"
+        [[ops]]
+        op = "mirror"
+        [vae]
+        copies = 1
+        min_clips = 1
+        [correct]
+        policy = "class"
+        tracker_budget_s = 60
+        "#,
+    )
+    .expect("recipe");
+    let names: Vec<String> = [
+        "HDM_bd_kickLFront1Reps_001_120",
+        "HDM_bk_kickLFront1Reps_002_120",
+        "HDM_bd_jogLeftCircle4StepsRstart_001_120",
+    ]
+    .map(String::from)
+    .to_vec();
+    let plan = plan(&recipe, &names, 0);
+    let job = |key: &str| plan.job(key).unwrap_or_else(|| panic!("no job {key}"));
+    let position = |key: &str| plan.jobs.iter().position(|j| j.key == key).unwrap();
+    // One tracker per class, on the class's clips.
+    match &job("tracker:kickLFront1Reps").kind {
+        JobKind::Tracker { clips, .. } => assert_eq!(clips, &names[..2]),
+        other => panic!("{other:?}"),
+    }
+    assert!(plan.job("tracker:jogLeftCircle4StepsRstart").is_some());
+    // No per-clip warm start from the originals: the tracker replaces it.
+    assert!(
+        !plan
+            .jobs
+            .iter()
+            .any(|j| j.key.starts_with("correct_original:"))
+    );
+    for (clip, class) in [
+        (
+            "HDM_bk_kickLFront1Reps_002_120__00_mirror_000",
+            "kickLFront1Reps",
+        ),
+        ("kickLFront1Reps__vae_000", "kickLFront1Reps"),
+        (
+            "HDM_bd_jogLeftCircle4StepsRstart_001_120__00_mirror_000",
+            "jogLeftCircle4StepsRstart",
+        ),
+    ] {
+        let key = format!("correct:{clip}");
+        let tracker = format!("tracker:{class}");
+        let c = job(&key);
+        match &c.kind {
+            JobKind::Correct {
+                tracker: Some(t),
+                sources,
+                ..
+            } => {
+                assert_eq!(t, class);
+                assert!(sources.is_empty());
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(c.deps.contains(&tracker), "{c:?}");
+        assert!(position(&tracker) < position(&key));
+    }
+
+    // With debiasing the originals are corrected, from their tracker too.
+    let debiased = Recipe::from_toml_str(
+        "[[ops]]\nop = \"mirror\"\n[correct]\npolicy = \"class\"\n[debias]\n",
+    )
+    .expect("recipe");
+    let plan = pipeline::plan(&debiased, &names, 0);
+    let original = plan
+        .job("correct_original:HDM_bd_jogLeftCircle4StepsRstart_001_120")
+        .expect("original");
+    assert_eq!(original.deps, vec!["tracker:jogLeftCircle4StepsRstart"]);
+
+    let e =
+        recipe_err("[[ops]]\nop = \"noise\"\n[correct]\npolicy = \"class\"\ntracker_frames = 0\n");
+    assert!(e.contains("tracker_frames"), "{e}");
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\npolicy = \"dataset\"\n");
+    assert!(e.contains("[correct]"), "{e}");
+}
+
+#[test]
+fn a_class_tracker_runs_in_process_and_its_corrections_start_from_it() {
+    let text = CORRECTED.replace(
+        "[correct]",
+        "[correct]\npolicy = \"class\"\ntracker_budget_s = 1",
+    );
+    let recipe = Recipe::from_toml_str(&text).expect("recipe");
+    let clips = [kick()];
+    let dir = tempfile::tempdir().expect("tempdir");
+    let work = dir.path().join("work");
+    let options = Options {
+        out: None,
+        work: &work,
+        seed: 5,
+        on_event: &quiet,
+    };
+    let summary = run(&recipe, &clips, &options).expect("run");
+    assert!(summary.failures.is_empty(), "{:?}", summary.failures);
+    let tracker = work.join("trackers/kickLFront1Reps");
+    let report =
+        correct::ClassReport::read(&tracker.join(correct::class::REPORT_FILE)).expect("class.json");
+    assert_eq!(report.clips, 1);
+    assert!(report.iterations >= 1);
+    // Every correction (the noisy copies and the original for debiasing)
+    // started from the tracker.
+    let reports: Vec<PathBuf> = ["correct", "originals"]
+        .iter()
+        .flat_map(|f| std::fs::read_dir(work.join(f)).expect("folder"))
+        .map(|e| e.expect("entry").path().join("report.json"))
+        .collect();
+    assert_eq!(reports.len(), 3);
+    for path in reports {
+        let r = correct::Report::read(&path).expect("report");
+        let from = r.warm_start.expect("warm-started");
+        assert!(from.contains("trackers"), "{from}");
     }
 }

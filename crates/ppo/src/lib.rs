@@ -31,5 +31,6 @@ pub use normalizer::RunningNorm;
 pub use policy::{GaussianPolicy, PolicyConfig};
 pub use trainer::{
     Control, CurvePoint, Evaluation, IterationReport, Progress, RunLimits, StopReason, Trainer,
+    mean_action,
 };
 pub use value::{ValueConfig, ValueNet};

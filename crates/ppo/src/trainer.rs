@@ -738,7 +738,9 @@ pub fn parameters<E: Env>(t: &Trainer<E>) -> Result<HashMap<String, Vec<f32>>> {
     Ok(m)
 }
 
-fn mean_action(
+/// The policy's mean action for one raw observation (normaliser frozen): the
+/// deterministic action, usable from several threads at once.
+pub fn mean_action(
     policy: &GaussianPolicy,
     norm: &RunningNorm,
     obs: &[f32],

@@ -26,6 +26,8 @@ pub mod kinds {
     pub const VAE: &str = "vae";
     /// Body-size variations of a two-person pair.
     pub const INTERACTION: &str = "interaction";
+    /// Train a class's tracker policy (`[correct] policy = "class"`).
+    pub const TRACKER: &str = "tracker";
     /// Physical correction of a source clip (warm start and debiasing data).
     pub const CORRECT_ORIGINAL: &str = "correct_original";
     /// Physical correction of a new clip.
@@ -39,6 +41,7 @@ pub mod kinds {
         SYNTHESIZE,
         VAE,
         INTERACTION,
+        TRACKER,
         CORRECT_ORIGINAL,
         CORRECT,
         DEBIAS_TRAIN,
@@ -242,4 +245,46 @@ pub mod artifacts {
     }
     /// The debiasing network, zipped.
     pub const DEBIAS_MODEL: &str = "work/debias/model.zip";
+    /// A class tracker's latest checkpoint, zipped (every correction of the
+    /// class starts from it).
+    pub fn tracker_checkpoints(group: &str) -> String {
+        format!("work/trackers/{group}/checkpoints.zip")
+    }
+    /// A class tracker's report (`correct::ClassReport`, `class.json`).
+    pub fn tracker_report(group: &str) -> String {
+        format!("work/trackers/{group}/class.json")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::kinds;
+
+    /// Workers claim only the kinds they list: every kind a plan can hold
+    /// must be one of them.
+    #[test]
+    fn every_planned_kind_is_a_kind_workers_claim() {
+        let names: Vec<String> = [
+            "HDM_bd_kickLFront1Reps_001_120",
+            "18_01_shake_A",
+            "18_01_shake_B",
+        ]
+        .map(String::from)
+        .to_vec();
+        let mut seen = std::collections::BTreeSet::new();
+        for policy in ["clip", "class"] {
+            let recipe = pipeline::Recipe::from_toml_str(&format!(
+                "[[ops]]\nop = \"mirror\"\n[vae]\nmin_clips = 1\n[interaction]\n\
+                 [correct]\npolicy = \"{policy}\"\n[debias]\n"
+            ))
+            .expect("recipe");
+            for job in pipeline::plan(&recipe, &names, 0).jobs {
+                seen.insert(job.kind.name());
+            }
+        }
+        for kind in &seen {
+            assert!(kinds::ALL.contains(kind), "workers do not claim `{kind}`");
+        }
+        assert_eq!(seen.len(), kinds::ALL.len(), "{seen:?}");
+    }
 }

@@ -65,10 +65,12 @@ fn failure(e: PipelineError) -> JobFailure {
     }
 }
 
+/// Jobs that train a policy: they upload PPO checkpoints while they run and
+/// resume from them (a class tracker too).
 fn is_correction(job: &PlannedJob) -> bool {
     matches!(
         job.kind,
-        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. }
+        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. } | JobKind::Tracker { .. }
     )
 }
 
@@ -76,7 +78,9 @@ fn is_correction(job: &PlannedJob) -> bool {
 /// checkpoints are uploaded from there; the debiasing model in `debias/`).
 fn exec_dir(dir: &Path, job: &PlannedJob) -> PathBuf {
     match job.kind {
-        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. } => dir.join("run"),
+        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. } | JobKind::Tracker { .. } => {
+            dir.join("run")
+        }
         JobKind::DebiasTrain { .. } => dir.join("debias"),
         _ => dir.join("job"),
     }
@@ -375,6 +379,19 @@ impl pipeline::Inputs for HttpInputs<'_> {
         unzip_into(&bytes, &into)?;
         Ok(Arc::new(debias::Debiaser::load(&into)?))
     }
+
+    /// The tracker's report and latest checkpoint, unpacked as the executor
+    /// expects its folder (`class.json`, `checkpoints/<latest>/`).
+    fn tracker(&self, group: &str) -> Result<PathBuf, PipelineError> {
+        let key = pipeline::plan::tracker_key(group);
+        let report = self.dep_file(&key, &artifacts::tracker_report(group))?;
+        let checkpoint = self.dep_file(&key, &artifacts::tracker_checkpoints(group))?;
+        let into = self.dir.join("tracker");
+        unzip_into(&checkpoint, &into.join("checkpoints"))?;
+        let path = into.join(correct::class::REPORT_FILE);
+        std::fs::write(&path, report).map_err(|e| io_error(&path, e))?;
+        Ok(into)
+    }
 }
 
 /// Uploads what the executor makes and builds the job's output.
@@ -540,6 +557,14 @@ impl pipeline::Outputs for Uploader<'_> {
                 // The executor saved it in its folder.
                 let bytes = zip_dir(self.run_dir)?;
                 self.put_work(artifacts::DEBIAS_MODEL.to_string(), bytes)
+            }
+            Made::Tracker { group, report } => {
+                let checkpoint = latest_checkpoint_zip(&self.run_dir.join("checkpoints"))?
+                    .ok_or_else(|| PipelineError::Job("the tracker left no checkpoint".into()))?;
+                let report = serde_json::to_vec(&report)
+                    .map_err(|e| PipelineError::Job(format!("class.json: {e}")))?;
+                self.put_work(artifacts::tracker_checkpoints(&group), checkpoint)?;
+                self.put_work(artifacts::tracker_report(&group), report)
             }
         }
     }

@@ -59,6 +59,9 @@ fn main() {
         ("worker_killed_mid_correction", || {
             block_on(worker_killed_mid_correction())
         }),
+        ("class_tracker_on_two_workers", || {
+            block_on(class_tracker_on_two_workers())
+        }),
     ];
     let started = Instant::now();
     let (mut passed, mut failed, mut filtered) = (0, 0, 0);
@@ -1009,6 +1012,48 @@ async fn correction_graph_on_two_workers() -> anyhow::Result<()> {
             println!(
                 "  correction graph: service (2 workers) {service_s:.1} s, \
                  pipeline::run in one process {local_s:.1} s"
+            );
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// `policy = "class"`: one worker trains the class tracker, and the
+/// correction (on whichever worker claims it) starts from the tracker it
+/// fetched through the coordinator; the manifest is the in-process run's.
+async fn class_tracker_on_two_workers() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            c.start_worker("w1", 0)?;
+            let mut recipe = correct_recipe();
+            recipe["correct"]["policy"] = json!("class");
+            recipe["correct"]["tracker_budget_s"] = json!(1);
+            recipe.as_object_mut().map(|r| r.remove("debias"));
+            let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
+            c.wait_for(&aug, "succeeded", Duration::from_secs(300))
+                .await?;
+            check_jobs(&c, &[("synthesize", 1), ("tracker", 1), ("correct", 1)]).await?;
+            let got = download(&c, &aug).await?;
+            let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
+            let report: Value =
+                serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
+            let from = report["warm_start"].as_str().unwrap_or_default();
+            ensure!(
+                from.contains("tracker"),
+                "the correction did not start from the tracker: {report}"
+            );
+            let out = c.dir.join("local-tracker");
+            std::fs::create_dir_all(&out)?;
+            local_run(&recipe, CORRECT_CLIPS, &out)?;
+            let ours = manifest_structure(&got["manifest.json"])?;
+            let local = manifest_structure(&std::fs::read(out.join("manifest.json"))?)?;
+            ensure!(
+                ours == local,
+                "manifests differ:\nservice {ours:#}\nlocal {local:#}"
             );
             Ok(())
         }

@@ -73,29 +73,33 @@ struct CorrectionArgs {
     /// Weight of the sole reward (0 = MotionAug's reward).
     #[arg(long, default_value_t = correct::CorrectConfig::default().physics.sole_reward_weight)]
     sole_reward_weight: f32,
+    /// Speed scale of the sole reward's sliding term, m/s (0 = off).
+    #[arg(long, default_value_t = correct::CorrectConfig::default().physics.skate_scale_m_s)]
+    skate_scale: f32,
+    /// Train one tracker policy per class on this many of its clips (spread
+    /// over the class) first, and start every clip's correction from it
+    /// (`correct::class`); 0 = one policy per clip from scratch.
+    #[arg(long, default_value_t = 0)]
+    tracker_clips: usize,
+    /// Wall-time budget of each class tracker, seconds.
+    #[arg(long, default_value_t = 1800.0)]
+    tracker_budget: f64,
+    /// PPO iterations of each class tracker at most.
+    #[arg(long)]
+    tracker_iterations: Option<u64>,
+    /// Upcoming reference frames the tracker sees.
+    #[arg(long, default_value_t = correct::ClassConfig::default().correct.physics.tracker_frames)]
+    tracker_frames: usize,
+    /// Correct only clips the tracker was not trained on.
+    #[arg(long)]
+    held_out: bool,
     /// Output folder: one correction folder per clip, table.md, table.json.
     #[arg(long)]
     out: PathBuf,
 }
 
-/// Corrects (or reuses) one clip into `dir`.
-fn correct_one(
-    path: &Path,
-    asf: &Path,
-    dir: &Path,
-    args: &CorrectionArgs,
-) -> anyhow::Result<correct::Report> {
-    let done = dir.join("report.json");
-    if done.is_file() {
-        return Ok(correct::Report::read(&done)?);
-    }
-    let motion = motion::io::load(
-        path,
-        &motion::io::LoadOptions {
-            skeleton: Some(asf.to_path_buf()),
-            ..Default::default()
-        },
-    )?;
+/// The per-clip settings the arguments give.
+fn base_config(args: &CorrectionArgs) -> correct::CorrectConfig {
     let mut config = correct::CorrectConfig {
         time_budget_s: args.time_budget,
         max_iterations: args.max_iterations,
@@ -104,9 +108,89 @@ fn correct_one(
     config.ppo.threads = args.threads;
     config.physics.character.calibrate_feet = !args.rest_feet;
     config.physics.sole_reward_weight = args.sole_reward_weight;
+    config.physics.skate_scale_m_s = args.skate_scale;
     config.residual_schedule = correct::ResidualSchedule {
+        start_scale: 1.0,
         final_scale: args.residual_final_scale,
         over_iterations: args.residual_anneal_iterations,
+    };
+    config
+}
+
+/// Trains (or reuses) the class tracker on `clips` in `dir`.
+fn train_tracker(
+    class: &str,
+    clips: &[eval::dataset::ClipFile],
+    data: &Path,
+    dir: &Path,
+    args: &CorrectionArgs,
+) -> anyhow::Result<correct::ClassReport> {
+    let done = dir.join(correct::class::REPORT_FILE);
+    if done.is_file() {
+        return Ok(correct::ClassReport::read(&done)?);
+    }
+    let motions = clips
+        .iter()
+        .map(|c| {
+            Ok((
+                c.name.clone(),
+                load_hdm05(&c.path, &data.join(format!("HDM_{}.asf", c.actor)))?,
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut config = correct::ClassConfig {
+        correct: correct::CorrectConfig {
+            time_budget_s: args.tracker_budget,
+            max_iterations: args.tracker_iterations,
+            ..base_config(args)
+        },
+        ..correct::ClassConfig::default()
+    };
+    config.correct.physics.tracker_frames = args.tracker_frames;
+    let resume = dir.join("checkpoints").is_dir();
+    let n = motions.len();
+    let report = correct::train_class(&motions, &config, dir, resume, |p| {
+        if let Some(a) = p.accepted {
+            let fails: Vec<String> = p.failures.iter().map(|(f, k)| format!("{f} {k}")).collect();
+            eprintln!(
+                "{class} tracker: iteration {}, {:.0} s, {a}/{n} clips accepted as is (failed: {})",
+                p.iteration,
+                p.wall_s,
+                fails.join(", ")
+            );
+        }
+    })?;
+    Ok(report)
+}
+
+fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
+    Ok(motion::io::load(
+        path,
+        &motion::io::LoadOptions {
+            skeleton: Some(asf.to_path_buf()),
+            ..Default::default()
+        },
+    )?)
+}
+
+/// Corrects (or reuses) one clip into `dir`, from the class tracker when
+/// there is one.
+fn correct_one(
+    path: &Path,
+    asf: &Path,
+    dir: &Path,
+    args: &CorrectionArgs,
+    tracker: Option<&(correct::ClassReport, PathBuf)>,
+) -> anyhow::Result<correct::Report> {
+    let done = dir.join("report.json");
+    if done.is_file() {
+        return Ok(correct::Report::read(&done)?);
+    }
+    let motion = load_hdm05(path, asf)?;
+    let base = base_config(args);
+    let config = match tracker {
+        Some((report, class_dir)) => report.warm_config(&base, class_dir),
+        None => base,
     };
     let resume = dir.join("checkpoints").is_dir();
     let name = crate::input::clip_name(path);
@@ -120,13 +204,43 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for class in &args.classes {
         let clips = eval::dataset::find_clips(&args.data, class)?;
-        let chosen = eval::table::physics::spread(&clips, args.per_class);
+        let tracker = if args.tracker_clips > 0 {
+            let on = eval::table::physics::spread(&clips, args.tracker_clips);
+            let dir = args.out.join(format!("{class}_tracker"));
+            let report = train_tracker(class, &on, &args.data, &dir, &args)?;
+            eprintln!(
+                "{class} tracker: {}/{} clips accepted as is after {} iterations, {:.0} s",
+                report.accepted(),
+                report.clips,
+                report.iterations,
+                report.wall_s
+            );
+            Some((report, dir, on))
+        } else {
+            None
+        };
+        let candidates: Vec<_> = match (&tracker, args.held_out) {
+            (Some((_, _, on)), true) => clips
+                .iter()
+                .filter(|c| !on.iter().any(|t| t.name == c.name))
+                .cloned()
+                .collect(),
+            _ => clips.clone(),
+        };
+        let chosen = eval::table::physics::spread(&candidates, args.per_class);
+        let tracker = tracker.map(|(r, d, _)| (r, d));
         let n = chosen.len();
         let mut reports = Vec::new();
         for (i, clip) in chosen.iter().enumerate() {
             let asf = args.data.join(format!("HDM_{}.asf", clip.actor));
             let t = Instant::now();
-            let r = correct_one(&clip.path, &asf, &args.out.join(&clip.name), &args)?;
+            let r = correct_one(
+                &clip.path,
+                &asf,
+                &args.out.join(&clip.name),
+                &args,
+                tracker.as_ref(),
+            )?;
             eprintln!(
                 "{class} {}/{n} {}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
                 i + 1,

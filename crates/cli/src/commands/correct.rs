@@ -47,6 +47,9 @@ pub struct Args {
     /// and toe on it; 0 = MotionAug's reward).
     #[arg(long, default_value_t = CorrectConfig::default().physics.sole_reward_weight)]
     sole_reward_weight: f32,
+    /// Speed scale of the sole reward's sliding term, m/s (0 = off).
+    #[arg(long, default_value_t = CorrectConfig::default().physics.skate_scale_m_s)]
+    skate_scale: f32,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
@@ -86,11 +89,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.acceptance.max_residual_force_ratio = args.max_residual_force_ratio;
     config.residual_schedule = correct::ResidualSchedule {
+        start_scale: 1.0,
         final_scale: args.residual_final_scale,
         over_iterations: args.residual_anneal_iterations,
     };
     config.physics.residual = args.residual;
     config.physics.sole_reward_weight = args.sole_reward_weight;
+    config.physics.skate_scale_m_s = args.skate_scale;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = !args.rest_feet;
     if args.keep_clip_height {

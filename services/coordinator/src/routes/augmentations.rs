@@ -53,8 +53,8 @@ pub struct AugmentationStatus {
     #[schema(minimum = 0, maximum = 1)]
     pub progress: f64,
     pub jobs: JobCounts,
-    /// Jobs of each kind: synthesize, vae, interaction, correct_original, correct,
-    /// debias_train, debias_apply.
+    /// Jobs of each kind: synthesize, vae, interaction, tracker,
+    /// correct_original, correct, debias_train, debias_apply.
     pub kinds: BTreeMap<String, i64>,
     pub errors: Vec<JobError>,
     pub created_at: DateTime<Utc>,
