@@ -356,6 +356,13 @@ fn correction(
     if let Some(tune) = ctx.tune_correction {
         tune(&mut config);
     }
+    // The clip as it was before correction, beside the corrected one (the
+    // viewer plays them side by side).
+    std::fs::create_dir_all(ctx.dir).map_err(|source| PipelineError::Io {
+        path: ctx.dir.to_path_buf(),
+        source,
+    })?;
+    motion::io::save(motion, ctx.dir.join("input.bvh"))?;
     let outcome =
         stages::correct_with_config(config, name, motion, ctx.dir, warm_start, ctx.on_progress)
             .map_err(|e| match e {

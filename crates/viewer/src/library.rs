@@ -248,6 +248,34 @@ impl Builder {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| dir.display().to_string());
+        // A `motionaug correct` output: corrected.bvh with its report.json.
+        let report = dir.join("report.json");
+        let corrected = Self::files(dir)?
+            .into_iter()
+            .find(|p| stem(p) == "corrected");
+        if let (true, Some(corrected)) = (report.is_file() && !manifest.is_file(), corrected) {
+            let source = std::fs::read(&report)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
+                .and_then(|r| r.get("source").and_then(Value::as_str).map(str::to_string))
+                .unwrap_or_else(|| group.clone());
+            let input = dir.join("input.bvh");
+            let mut versions = Vec::new();
+            if input.is_file() {
+                versions.push(self.add(input, source.clone(), source.clone(), Role::Source, false));
+            }
+            let i = self.add(
+                corrected,
+                format!("{source} (corrected)"),
+                source,
+                Role::Corrected,
+                true,
+            );
+            versions.push(i);
+            self.clips[i].report = Some(report);
+            self.clips[i].versions = versions.iter().map(|v| v.to_string()).collect();
+            in_manifest.extend(["corrected".into(), "input".into()]);
+        }
         for path in Self::files(dir)? {
             if in_manifest.iter().any(|m: &String| *m == stem(&path)) {
                 continue;
