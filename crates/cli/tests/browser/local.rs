@@ -217,7 +217,7 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
         .await;
     assert!(bars.as_u64().unwrap() >= 8, "{bars}");
     browser
-        .eval("document.querySelector('main').scrollTop = 1e6; return 0;", vec![])
+        .eval("document.querySelector('#panels').scrollIntoView(); return 0;", vec![])
         .await;
     tokio::time::sleep(Duration::from_millis(200)).await;
     save(&browser.screenshot().await, "viewer-correction");

@@ -59,7 +59,7 @@ class Track {
     this.target = null;
     if (meta.ik && meta.ik.target) {
       this.target = new THREE.Mesh(
-        new THREE.OctahedronGeometry(0.05),
+        new THREE.OctahedronGeometry(0.06),
         new THREE.MeshStandardMaterial({ color: TARGET, emissive: 0x400020 }),
       );
       this.group.add(this.target);
@@ -117,7 +117,7 @@ class Track {
     const dir = new THREE.Vector3();
     const color = new THREE.Color();
     const flagsAt = (i) => (this.flags ? this.flags[frame * this.points + i] : 0);
-    const nearKey = this.meta.ik && Math.abs(frame - this.meta.ik.keyframe) <= Math.max(1, Math.round(this.meta.fps / 30));
+    const nearKey = this.meta.ik && Math.abs(frame - this.meta.ik.keyframe) <= Math.max(2, Math.round(this.meta.fps / 15));
     this.bones.forEach(([parent, child], k) => {
       a.fromArray(p, base + parent * 3).add(this.offset);
       b.fromArray(p, base + child * 3).add(this.offset);
@@ -298,16 +298,42 @@ export class Player {
     return { min, max };
   }
 
+  /// Looks at the clips from the side their layout spreads along (so side by
+  /// side clips are next to each other), from far enough to see every point.
   frameCamera() {
     if (!this.tracks.length) return;
     const { min, max } = this.bounds();
     const centre = new THREE.Vector3((min[0] + max[0]) / 2, (min[1] + max[1]) / 2, (min[2] + max[2]) / 2);
-    const size = Math.max(max[0] - min[0], max[1] - min[1], max[2] - min[2], 1.5);
+    const extent = new THREE.Vector3(max[0] - min[0], max[1] - min[1], max[2] - min[2]);
+    // View along the horizontal axis the clips span least.
+    const alongX = extent.x <= extent.z;
+    const view = alongX ? new THREE.Vector3(1, 0.45, 0.35) : new THREE.Vector3(0.35, 0.45, 1);
+    view.normalize();
+    const width = Math.max(alongX ? extent.z : extent.x, 1.2);
+    const height = Math.max(extent.y, 1.8);
+    const fov = (this.camera.fov * Math.PI) / 180;
+    const fitHeight = height / 2 / Math.tan(fov / 2);
+    const fitWidth = width / 2 / Math.tan(fov / 2) / this.camera.aspect;
+    let distance = Math.max(fitHeight, fitWidth) + (alongX ? extent.x : extent.z) / 2;
     this.controls.target.copy(centre);
-    this.camera.position.copy(centre).add(new THREE.Vector3(0.9, 0.5, 1.2).normalize().multiplyScalar(size * 1.15));
+    // Back off until every corner of the box is well inside the picture.
+    const corners = [];
+    for (const x of [min[0], max[0]]) for (const y of [min[1], max[1]]) for (const z of [min[2], max[2]]) corners.push(new THREE.Vector3(x, y, z));
+    for (let i = 0; i < 30; i++) {
+      this.camera.position.copy(centre).addScaledVector(view, distance);
+      this.camera.lookAt(centre);
+      this.camera.updateMatrixWorld();
+      const inside = corners.every((c) => {
+        const p = c.clone().project(this.camera);
+        return Math.abs(p.x) < 0.9 && Math.abs(p.y) < 0.85 && p.z < 1;
+      });
+      if (inside) break;
+      distance *= 1.12;
+    }
+    const size = Math.max(extent.x, extent.y, extent.z, 1.5);
     this.camera.far = Math.max(500, size * 20);
-    this.scene.fog.near = size * 4;
-    this.scene.fog.far = size * 12;
+    this.scene.fog.near = distance * 3;
+    this.scene.fog.far = distance * 9;
     this.camera.updateProjectionMatrix();
     this.sun.target.position.copy(centre);
     this.sun.position.copy(centre).add(new THREE.Vector3(4, 8, 3));

@@ -27,13 +27,14 @@ function fmt(v) {
 /// The learning curve of `points` ([wall_s, samples, r_norm] each) as two
 /// plots in one panel; returns the panel (its `update(points)` redraws).
 export function curvePanel(title, points) {
-  const panel = el("div", { class: "panel curve" }, el("h4", {}, title));
+  const row = el("div", { class: "plots" });
+  const panel = el("div", { class: "panel curve" }, el("h4", {}, title), row);
   const make = (xIndex, xLabel) => {
     const holder = el("div", { class: "plot", "data-x": xLabel });
-    panel.append(holder);
+    row.append(holder);
     const opts = {
-      width: 360,
-      height: 190,
+      width: 340,
+      height: 180,
       scales: { x: { time: false }, y: { range: [0, 1] } },
       legend: { show: false },
       series: [{ label: xLabel }, { label: "R_norm", stroke: CURVE, width: 2, points: { show: true, size: 5, fill: CURVE } }],
