@@ -49,7 +49,8 @@ fn bundle(web: &Path, out: &Path) -> Result<PathBuf, String> {
     let work = out.join("web");
     copy_tree(&web.join("src"), &work.join("src")).map_err(|e| format!("copying web/src: {e}"))?;
     for file in ["package.json", "package-lock.json", "build.mjs"] {
-        std::fs::copy(web.join(file), work.join(file)).map_err(|e| format!("copying web/{file}: {e}"))?;
+        std::fs::copy(web.join(file), work.join(file))
+            .map_err(|e| format!("copying web/{file}: {e}"))?;
     }
     let lock = std::fs::read(web.join("package-lock.json")).map_err(|e| e.to_string())?;
     let stamp = work.join("node_modules").join(".motionaug-lock");
@@ -133,7 +134,8 @@ fn embed(dist: &Path) -> String {
         "viewer bundle {} has no index.html",
         dist.display()
     );
-    let mut code = String::from("/// Every file of the bundle.\npub static ASSETS: &[Asset] = &[\n");
+    let mut code =
+        String::from("/// Every file of the bundle.\npub static ASSETS: &[Asset] = &[\n");
     for name in names {
         let path = dist.join(&name);
         writeln!(

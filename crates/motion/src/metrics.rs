@@ -364,6 +364,24 @@ mod tests {
     }
 
     #[test]
+    fn foot_contacts_are_the_skating_metrics_steps() {
+        let th = Thresholds::default();
+        let sliding = foot_contacts(&standing(40, 0.5, 0.0), &th);
+        // LeftToe and RightToe with their end sites.
+        assert_eq!(
+            sliding.points,
+            [(4, false), (4, true), (8, false), (8, true)]
+        );
+        assert_eq!(sliding.steps.len(), 39 * 4);
+        for step in &sliding.steps {
+            let speed = step.expect("planted all along");
+            assert!((speed - 0.5).abs() < 1e-9, "{speed}");
+        }
+        let floating = foot_contacts(&standing(20, 0.3, 0.2), &th);
+        assert!(floating.steps.iter().all(Option::is_none));
+    }
+
+    #[test]
     fn lowering_by_5_cm_penetrates_5_cm_and_lifting_floats() {
         let m = plausibility(&standing(20, 0.0, -0.05));
         assert!((m.penetration_mean_m - 0.05).abs() < 1e-9, "{m:?}");

@@ -231,7 +231,11 @@ impl ClipView {
         let frames = self.meta.frames;
         let end = start.saturating_add(count).min(frames);
         if start >= frames && !(start == 0 && frames == 0) {
-            return Err(ViewerError::Range { start, end: start.saturating_add(count), frames });
+            return Err(ViewerError::Range {
+                start,
+                end: start.saturating_add(count),
+                frames,
+            });
         }
         let per = self.meta.points.len() * 3;
         let values = &self.positions[start * per..end * per];
@@ -277,10 +281,10 @@ pub fn npz_motion(bytes: &[u8], label: &str) -> Result<(Motion, Option<Vec<bool>
     let parents = need("parents")?
         .to_i32()
         .ok_or_else(|| bad("`parents` is not int32".into()))?;
-    let offsets = numbers(need("offsets")?)
-        .ok_or_else(|| bad("`offsets` is not numeric".into()))?;
-    let rotations = numbers(need("rotations")?)
-        .ok_or_else(|| bad("`rotations` is not numeric".into()))?;
+    let offsets =
+        numbers(need("offsets")?).ok_or_else(|| bad("`offsets` is not numeric".into()))?;
+    let rotations =
+        numbers(need("rotations")?).ok_or_else(|| bad("`rotations` is not numeric".into()))?;
     let root = numbers(need("root_translation")?)
         .ok_or_else(|| bad("`root_translation` is not numeric".into()))?;
     let fps = numbers(need("fps")?)
@@ -336,4 +340,158 @@ pub fn npz_motion(bytes: &[u8], label: &str) -> Result<(Motion, Option<Vec<bool>
         }
     };
     Ok((motion, mask))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walk() -> Motion {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../examples/data/16_11_walk_veer_left.bvh");
+        motion::load(&path, &motion::LoadOptions::default()).expect("the bundled walk")
+    }
+
+    fn floats(bytes: &[u8]) -> Vec<f32> {
+        bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
+    }
+
+    #[test]
+    fn points_are_joints_then_end_sites_at_their_fk_positions() {
+        let m = walk();
+        let view = ClipView::from_motion("walk", &m, None).unwrap();
+        let meta = view.meta();
+        let ends = m
+            .skeleton()
+            .joints()
+            .iter()
+            .filter(|j| j.end_site.is_some())
+            .count();
+        assert_eq!(meta.points.len(), m.joints() + ends);
+        assert_eq!(meta.frames, m.frames());
+        assert_eq!(meta.frame_bytes, meta.points.len() * 12);
+        assert!(
+            meta.points[m.joints()..]
+                .iter()
+                .all(|p| p.end && p.parent >= 0)
+        );
+        let t = 100;
+        let page = floats(&view.frames_bytes(t, 3).unwrap());
+        assert_eq!(page.len(), 3 * meta.points.len() * 3);
+        for (j, p) in m.world_positions(t).iter().enumerate() {
+            for k in 0..3 {
+                assert!((page[j * 3 + k] as f64 - p[k]).abs() < 1e-5);
+            }
+        }
+        // The last page is cut at the end; past the end is an error.
+        let tail = view.frames_bytes(m.frames() - 2, 10).unwrap();
+        assert_eq!(tail.len(), 2 * meta.frame_bytes);
+        assert!(view.frames_bytes(m.frames(), 1).is_err());
+        for k in 0..3 {
+            assert!(meta.bounds.min[k] < meta.bounds.max[k]);
+        }
+    }
+
+    #[test]
+    fn planted_soles_are_flagged_and_only_they() {
+        let m = walk();
+        let view = ClipView::from_motion("walk", &m, None).unwrap();
+        let meta = view.meta();
+        let n_p = meta.points.len();
+        assert!(!meta.soles.is_empty());
+        let mut contact_frames = 0;
+        for t in 0..meta.frames {
+            for p in 0..n_p {
+                let f = view.flags()[t * n_p + p];
+                assert_eq!(f & OCCLUDED, 0, "no mask, nothing occluded");
+                if f & (CONTACT | SKATING) != 0 {
+                    assert!(
+                        meta.soles.contains(&p),
+                        "{} is not a sole point",
+                        meta.points[p].name
+                    );
+                    assert!(f & CONTACT != 0, "skating is a kind of contact");
+                    contact_frames += 1;
+                }
+            }
+        }
+        // A walk is on the ground much of the time.
+        assert!(contact_frames > meta.frames / 4, "{contact_frames}");
+    }
+
+    #[test]
+    fn a_mask_hides_its_joints_and_their_end_sites() {
+        let m = walk();
+        let (n_t, n_j) = (m.frames(), m.joints());
+        let hidden = m
+            .skeleton()
+            .joints()
+            .iter()
+            .position(|j| j.end_site.is_some())
+            .unwrap();
+        let visible: Vec<bool> = (0..n_t * n_j)
+            .map(|i| !(i % n_j == hidden && i / n_j >= 10))
+            .collect();
+        let view = ClipView::from_motion("walk", &m, Some(&visible)).unwrap();
+        let meta = view.meta();
+        assert!(meta.masked);
+        let n_p = meta.points.len();
+        let end = meta
+            .points
+            .iter()
+            .position(|p| p.end && p.parent == hidden as i32)
+            .unwrap();
+        for t in 0..n_t {
+            for p in 0..n_p {
+                let occluded = view.flags()[t * n_p + p] & OCCLUDED != 0;
+                assert_eq!(
+                    occluded,
+                    t >= 10 && (p == hidden || p == end),
+                    "frame {t} point {p}"
+                );
+            }
+        }
+        assert!(ClipView::from_motion("walk", &m, Some(&visible[1..])).is_err());
+    }
+
+    #[test]
+    fn ik_keyframes_follow_the_clip_rate() {
+        let m = walk();
+        let view = ClipView::from_motion("walk", &m, None).unwrap().with_ik(
+            "RightFoot",
+            1.5,
+            Some([0.1, 0.0, 0.2]),
+        );
+        let ik = view.meta().ik.clone().expect("RightFoot is a joint");
+        assert_eq!(ik.keyframe, (1.5 * m.fps()).round() as usize);
+        assert_eq!(view.meta().points[ik.effector].name, "RightFoot");
+        let none =
+            ClipView::from_motion("walk", &m, None)
+                .unwrap()
+                .with_ik("NoSuchJoint", 1.0, None);
+        assert!(none.meta().ik.is_none());
+    }
+
+    #[test]
+    fn npz_outputs_read_back_with_their_mask() {
+        let m = walk();
+        let (n_t, n_j) = (m.frames(), m.joints());
+        let visible: Vec<bool> = (0..n_t * n_j).map(|i| i % 3 != 0).collect();
+        let mask = motion::npz::NpyArray::bool("mask", &[n_t, n_j], &visible).unwrap();
+        let bytes = motion::npz::motion_to_bytes(&m, &[mask]).unwrap();
+        let (back, read_mask) = npz_motion(&bytes, "walk.npz").unwrap();
+        assert_eq!(read_mask.as_deref(), Some(&visible[..]));
+        assert_eq!((back.frames(), back.joints()), (n_t, n_j));
+        assert!((back.fps() - m.fps()).abs() < 1e-9);
+        for t in [0, n_t / 2, n_t - 1] {
+            for (a, b) in m.world_positions(t).iter().zip(back.world_positions(t)) {
+                assert!((*a - b).length() < 1e-4, "frame {t}: {a} vs {b}");
+            }
+        }
+        let err = npz_motion(b"not a zip", "bad.npz").unwrap_err();
+        assert!(err.to_string().contains("bad.npz"), "{err}");
+    }
 }

@@ -171,7 +171,9 @@ fn skeleton_for(clip: &Path, given: Option<&Path>) -> Option<PathBuf> {
 /// The frame rate a BVH file states (`Frame Time`), without reading the rest.
 fn bvh_fps(path: &Path) -> Option<f64> {
     let text = std::fs::read_to_string(path).ok()?;
-    let line = text.lines().find(|l| l.trim_start().starts_with("Frame Time"))?;
+    let line = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("Frame Time"))?;
     let dt: f64 = line.split(':').nth(1)?.trim().parse().ok()?;
     (dt > 0.0).then_some(1.0 / dt)
 }
@@ -184,7 +186,14 @@ struct Builder {
 
 impl Builder {
     /// Adds a clip (once per path); returns its index.
-    fn add(&mut self, path: PathBuf, name: String, group: String, role: Role, listed: bool) -> usize {
+    fn add(
+        &mut self,
+        path: PathBuf,
+        name: String,
+        group: String,
+        role: Role,
+        listed: bool,
+    ) -> usize {
         if let Some(&i) = self.by_path.get(&path) {
             if listed {
                 self.clips[i].listed = true;
@@ -226,9 +235,12 @@ impl Builder {
             if !path.is_file() {
                 continue;
             }
-            let better = by_stem
-                .get(&stem(&path))
-                .is_none_or(|old| rank < CLIP_EXTENSIONS.iter().position(|x| *x == ext(old)).unwrap_or(9));
+            let better = by_stem.get(&stem(&path)).is_none_or(|old| {
+                rank < CLIP_EXTENSIONS
+                    .iter()
+                    .position(|x| *x == ext(old))
+                    .unwrap_or(9)
+            });
             if better {
                 by_stem.insert(stem(&path), path);
             }
@@ -308,7 +320,10 @@ impl Builder {
                 source_name.clone()
             };
             let correction = entry.get("correction").filter(|c| !c.is_null());
-            let debiased = entry.get("debiased").and_then(Value::as_bool).unwrap_or(false);
+            let debiased = entry
+                .get("debiased")
+                .and_then(Value::as_bool)
+                .unwrap_or(false);
             let role = if debiased {
                 Role::Debiased
             } else if correction.is_some() {
@@ -326,7 +341,13 @@ impl Builder {
             // The source, as the command line named it (relative to here or absolute).
             let source_path = PathBuf::from(source);
             let source_fps = if source_path.is_file() {
-                let i = self.add(source_path.clone(), source_name.clone(), group.clone(), Role::Source, true);
+                let i = self.add(
+                    source_path.clone(),
+                    source_name.clone(),
+                    group.clone(),
+                    Role::Source,
+                    true,
+                );
                 versions.push(i);
                 match ext(&source_path).as_str() {
                     "bvh" => bvh_fps(&source_path),
@@ -336,7 +357,11 @@ impl Builder {
                 None
             };
             let originals = dir.join("work").join("originals").join(&source_name);
-            if !source_name.is_empty() && originals.join("corrected.bvh").is_file() {
+            // Only beside a corrected output: what correction does to captured motion.
+            if correction.is_some()
+                && !source_name.is_empty()
+                && originals.join("corrected.bvh").is_file()
+            {
                 let i = self.add(
                     originals.join("corrected.bvh"),
                     format!("{source_name} (corrected)"),
@@ -348,7 +373,10 @@ impl Builder {
                 self.clips[i].report = report.is_file().then_some(report);
                 versions.push(i);
             }
-            let correction_dir = report.as_ref().and_then(|r| r.parent()).map(Path::to_path_buf);
+            let correction_dir = report
+                .as_ref()
+                .and_then(|r| r.parent())
+                .map(Path::to_path_buf);
             let mut synth_fps = if correction.is_none() {
                 entry.get("fps").and_then(Value::as_f64)
             } else {
@@ -472,7 +500,10 @@ impl LibraryClip {
         if let Some(npz) = &self.mask_from {
             let bytes = std::fs::read(npz).map_err(io(npz))?;
             let arrays = motion::npz::read(&bytes).map_err(io(npz))?;
-            if let Some(m) = arrays.iter().find(|a| a.name == "mask").and_then(|a| a.to_u8())
+            if let Some(m) = arrays
+                .iter()
+                .find(|a| a.name == "mask")
+                .and_then(|a| a.to_u8())
                 && m.len() == motion.frames() * motion.joints()
             {
                 mask = Some(m.into_iter().map(|b| b != 0).collect());
@@ -510,5 +541,173 @@ impl LibraryClip {
             listed: self.listed,
             urls,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn walk_path() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data/16_11_walk_veer_left.bvh")
+    }
+
+    /// An augment output folder as the pipeline lays it out: a noise output,
+    /// a masked IK output, and a corrected + debiased output with its work files.
+    fn output_folder(dir: &Path) {
+        let walk = motion::load(walk_path(), &motion::LoadOptions::default()).unwrap();
+        let source = walk_path().display().to_string();
+        for name in ["w__00_noise_000", "w__01_ik_000", "w__02_noise_000"] {
+            motion::save(&walk, dir.join(format!("{name}.bvh"))).unwrap();
+        }
+        let n = walk.frames() * walk.joints();
+        let mask =
+            motion::npz::NpyArray::bool("mask", &[walk.frames(), walk.joints()], &vec![false; n])
+                .unwrap();
+        std::fs::write(
+            dir.join("w__01_ik_000.npz"),
+            motion::npz::motion_to_bytes(&walk, &[mask]).unwrap(),
+        )
+        .unwrap();
+        let correct = dir.join("work/correct/w__02_noise_000");
+        let originals = dir.join("work/originals/16_11_walk_veer_left");
+        for d in [&correct, &originals] {
+            std::fs::create_dir_all(d).unwrap();
+            motion::save(&walk, d.join("corrected.bvh")).unwrap();
+            std::fs::write(d.join("report.json"), "{}").unwrap();
+        }
+        motion::save(&walk, correct.join("input.bvh")).unwrap();
+        let entry = |file: &str, op: &str| {
+            json!({"file": file, "source": source, "op": op, "op_index": 0, "copy": 0,
+                   "seed": 1, "params": {}, "frames": walk.frames(), "fps": walk.fps()})
+        };
+        let mut ik = entry("w__01_ik_000.bvh", "ik");
+        ik["effector"] = json!("RightFoot");
+        ik["keyframe"] = json!(60);
+        ik["target"] = json!([0.1, 0.0, 0.3]);
+        let mut corrected = entry("w__02_noise_000.bvh", "noise");
+        corrected["correction"] = json!({"report": "work/correct/w__02_noise_000/report.json"});
+        corrected["debiased"] = json!(true);
+        let manifest = json!([entry("w__00_noise_000.bvh", "noise"), ik, corrected]);
+        std::fs::write(dir.join("manifest.json"), manifest.to_string()).unwrap();
+        // A file the manifest does not name is still listed.
+        motion::save(&walk, dir.join("extra.bvh")).unwrap();
+    }
+
+    #[test]
+    fn an_output_folder_lists_its_entries_with_their_versions() {
+        let tmp = tempfile::tempdir().unwrap();
+        output_folder(tmp.path());
+        let lib = scan(&[tmp.path().to_path_buf()], &ScanOptions::default()).unwrap();
+        let by_name = |n: &str| {
+            lib.clips
+                .iter()
+                .find(|c| c.name == n)
+                .unwrap_or_else(|| panic!("no {n}"))
+        };
+        let listed: Vec<&str> = lib
+            .clips
+            .iter()
+            .filter(|c| c.listed)
+            .map(|c| c.name.as_str())
+            .collect();
+        assert_eq!(
+            listed,
+            [
+                "16_11_walk_veer_left",
+                "w__00_noise_000",
+                "w__01_ik_000",
+                "w__02_noise_000",
+                "extra"
+            ]
+        );
+        let noise = by_name("w__00_noise_000");
+        assert_eq!(noise.role, Role::Synthesised);
+        assert_eq!(noise.group, "16_11_walk_veer_left");
+        assert_eq!(
+            noise.versions,
+            [by_name("16_11_walk_veer_left").id.clone(), noise.id.clone()]
+        );
+        let ik = by_name("w__01_ik_000");
+        assert_eq!(
+            ik.mask_from.as_deref(),
+            Some(tmp.path().join("w__01_ik_000.npz").as_path())
+        );
+        let (effector, at, target) = ik.ik.clone().unwrap();
+        assert_eq!(effector, "RightFoot");
+        assert!((at - 0.5).abs() < 1e-9, "keyframe 60 at 120 Hz");
+        assert_eq!(target, Some([0.1, 0.0, 0.3]));
+        let debiased = by_name("w__02_noise_000");
+        assert_eq!(debiased.role, Role::Debiased);
+        let roles: Vec<Role> = debiased
+            .versions
+            .iter()
+            .map(|id| lib.clips.iter().find(|c| &c.id == id).unwrap().role)
+            .collect();
+        assert_eq!(
+            roles,
+            [
+                Role::Source,
+                Role::SourceCorrected,
+                Role::Synthesised,
+                Role::Corrected,
+                Role::Debiased
+            ]
+        );
+        assert!(debiased.report.is_some());
+        assert_eq!(by_name("extra").role, Role::Clip);
+
+        // Loading: the mask hides every joint, the IK keyframe is on the clip's frames.
+        let view = ik.load(&ScanOptions::default()).unwrap();
+        assert!(view.meta().masked);
+        assert_eq!(view.meta().ik.as_ref().unwrap().keyframe, 60);
+        let described = ik.describe(Urls {
+            meta: "m".into(),
+            frames: "f".into(),
+            flags: "g".into(),
+            report: None,
+            download: None,
+        });
+        assert_eq!(described.frames, Some(view.meta().frames as u64));
+    }
+
+    #[test]
+    fn files_and_folders_without_manifest() {
+        let tmp = tempfile::tempdir().unwrap();
+        let walk = motion::load(walk_path(), &motion::LoadOptions::default()).unwrap();
+        motion::save(&walk, tmp.path().join("a.bvh")).unwrap();
+        motion::save(&walk, tmp.path().join("a.npz")).unwrap();
+        motion::save(&walk, tmp.path().join("b.npz")).unwrap();
+        let lib = scan(&[tmp.path().to_path_buf()], &ScanOptions::default()).unwrap();
+        let files: Vec<String> = lib
+            .clips
+            .iter()
+            .map(|c| c.path.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(files, ["a.bvh", "b.npz"], "one clip per stem, BVH first");
+        let b = lib.clips[1].load(&ScanOptions::default()).unwrap();
+        assert_eq!(b.meta().frames, walk.frames());
+        let one = scan(&[walk_path()], &ScanOptions::default()).unwrap();
+        assert_eq!(one.clips.len(), 1);
+        assert!(scan(&[tmp.path().join("nothing")], &ScanOptions::default()).is_err());
+        std::fs::write(tmp.path().join("x.txt"), "").unwrap();
+        assert!(scan(&[tmp.path().join("x.txt")], &ScanOptions::default()).is_err());
+    }
+
+    #[test]
+    fn hdm05_clips_find_their_skeleton() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+        let lib = scan(&[dir.clone()], &ScanOptions::default()).unwrap();
+        let kick = lib
+            .clips
+            .iter()
+            .find(|c| c.name.starts_with("HDM_bd_kick"))
+            .unwrap();
+        assert_eq!(
+            kick.skeleton.as_deref(),
+            Some(dir.join("HDM_bd.asf").as_path())
+        );
+        assert!(kick.load(&ScanOptions::default()).unwrap().meta().frames > 100);
     }
 }

@@ -20,8 +20,8 @@
 //! coordinator from there through the runtime's handle.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use motion::Motion;
@@ -238,7 +238,12 @@ async fn watch(
 
 /// Uploads the learning curve when it has new points (for the viewer; a
 /// failed upload is only logged: the curve is a view, not a result).
-async fn upload_curve(ctx: &JobContext, name: &str, curve: &Mutex<Vec<[f64; 3]>>, sent: &mut usize) {
+async fn upload_curve(
+    ctx: &JobContext,
+    name: &str,
+    curve: &Mutex<Vec<[f64; 3]>>,
+    sent: &mut usize,
+) {
     let body = match curve.lock() {
         Ok(points) if points.len() > *sent => {
             *sent = points.len();

@@ -129,7 +129,10 @@ fn router(state: Shared) -> Router {
         .route("/api/info", get(info))
         .route("/api/clips", get(clips))
         .route("/api/clips/{id}/{part}", get(part))
-        .route("/{file}", get(|Path(file): Path<String>| async move { asset(&file) }))
+        .route(
+            "/{file}",
+            get(|Path(file): Path<String>| async move { asset(&file) }),
+        )
         .with_state(state)
 }
 
@@ -222,16 +225,22 @@ async fn part(
                     .report
                     .as_ref()
                     .ok_or_else(|| problem(StatusCode::NOT_FOUND, "no correction report"))?;
-                let bytes = tokio::fs::read(path)
-                    .await
-                    .map_err(|e| problem(StatusCode::NOT_FOUND, format!("{}: {e}", path.display())))?;
+                let bytes = tokio::fs::read(path).await.map_err(|e| {
+                    problem(StatusCode::NOT_FOUND, format!("{}: {e}", path.display()))
+                })?;
                 Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
             }
             "file" => {
                 let bytes = tokio::fs::read(&clip.path).await.map_err(|e| {
-                    problem(StatusCode::NOT_FOUND, format!("{}: {e}", clip.path.display()))
+                    problem(
+                        StatusCode::NOT_FOUND,
+                        format!("{}: {e}", clip.path.display()),
+                    )
                 })?;
-                let name = clip.path.file_name().map(|n| n.to_string_lossy().into_owned());
+                let name = clip
+                    .path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned());
                 Ok((
                     [
                         (header::CONTENT_TYPE, "application/octet-stream".to_string()),

@@ -104,7 +104,13 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
         serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
     let mut expected: BTreeSet<String> = manifest
         .iter()
-        .map(|e| e["file"].as_str().unwrap().trim_end_matches(".bvh").to_string())
+        .map(|e| {
+            e["file"]
+                .as_str()
+                .unwrap()
+                .trim_end_matches(".bvh")
+                .to_string()
+        })
         .collect();
     expected.insert("16_11_walk_veer_left".into());
     expected.insert("16_11_walk_veer_left (corrected)".into());
@@ -120,20 +126,36 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     assert_eq!(listed, expected);
 
     // A noise output plays beside its source: a skeleton is drawn, and it moves.
-    click(&browser, "li.clip[data-name='16_11_walk_veer_left__00_noise_000']").await;
+    click(
+        &browser,
+        "li.clip[data-name='16_11_walk_veer_left__00_noise_000']",
+    )
+    .await;
     loaded(&browser, 2).await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     let still = browser.screenshot().await;
     let stats = canvas_stats(&browser, &still).await;
-    assert!(stats["saturated"].as_u64().unwrap() > 300, "no skeleton drawn: {stats}");
-    assert!(stats["colors"].as_u64().unwrap() > 20, "a blank canvas: {stats}");
+    assert!(
+        stats["saturated"].as_u64().unwrap() > 300,
+        "no skeleton drawn: {stats}"
+    );
+    assert!(
+        stats["colors"].as_u64().unwrap() > 20,
+        "a blank canvas: {stats}"
+    );
     save(&still, "viewer-local");
     let roles = browser
-        .eval("return window.__viewer.player.tracks.map(t => t.clip.role);", vec![])
+        .eval(
+            "return window.__viewer.player.tracks.map(t => t.clip.role);",
+            vec![],
+        )
         .await;
     assert_eq!(roles, json!(["source", "synthesised"]));
     let contacts = browser
-        .eval("return window.__viewer.player.tracks[0].flags.some(f => f & 2);", vec![])
+        .eval(
+            "return window.__viewer.player.tracks[0].flags.some(f => f & 2);",
+            vec![],
+        )
         .await;
     assert_eq!(contacts, json!(true), "the walk's planted feet are flagged");
     click(&browser, "#play").await;
@@ -141,12 +163,21 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     let moving = browser.screenshot().await;
     let changed = canvas_diff(&browser, &still, &moving).await;
     assert!(changed > 200, "only {changed} pixels changed while playing");
-    let time = browser.eval("return window.__viewer.player.time;", vec![]).await;
-    assert!(time.as_f64().unwrap() > 0.0, "the clock did not run: {time}");
+    let time = browser
+        .eval("return window.__viewer.player.time;", vec![])
+        .await;
+    assert!(
+        time.as_f64().unwrap() > 0.0,
+        "the clock did not run: {time}"
+    );
     click(&browser, "#play").await;
 
     // A masked clip: occluded joints are flagged.
-    click(&browser, "li.clip[data-name='16_11_walk_veer_left__04_mask_000']").await;
+    click(
+        &browser,
+        "li.clip[data-name='16_11_walk_veer_left__04_mask_000']",
+    )
+    .await;
     loaded(&browser, 2).await;
     let occluded = browser
         .eval(
@@ -157,7 +188,11 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     assert_eq!(occluded, json!([true, true]));
 
     // An IK edit: effector, keyframe and target are marked.
-    click(&browser, "li.clip[data-name='16_11_walk_veer_left__05_ik_000']").await;
+    click(
+        &browser,
+        "li.clip[data-name='16_11_walk_veer_left__05_ik_000']",
+    )
+    .await;
     loaded(&browser, 2).await;
     let entry = manifest
         .iter()
@@ -169,13 +204,19 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     assert_eq!(ik["keyframe"], entry["keyframe"], "{ik}");
     assert_eq!(ik["effector_name"], entry["effector"]);
     let marks = browser
-        .eval("return document.querySelectorAll('#keyframes .mark').length;", vec![])
+        .eval(
+            "return document.querySelectorAll('#keyframes .mark').length;",
+            vec![],
+        )
         .await;
     assert_eq!(marks, json!(1));
     browser
-        .eval("window.__viewer.player.seek(arguments[0]); return 0;", vec![json!(
-            entry["keyframe"].as_f64().unwrap() / entry["fps"].as_f64().unwrap()
-        )])
+        .eval(
+            "window.__viewer.player.seek(arguments[0]); return 0;",
+            vec![json!(
+                entry["keyframe"].as_f64().unwrap() / entry["fps"].as_f64().unwrap()
+            )],
+        )
         .await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     save(&browser.screenshot().await, "viewer-ik");
@@ -183,13 +224,20 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     // Overlay puts every clip in the same place.
     click(&browser, "#overlay").await;
     let offsets = browser
-        .eval("return window.__viewer.player.tracks.every(t => t.offset.length() === 0);", vec![])
+        .eval(
+            "return window.__viewer.player.tracks.every(t => t.offset.length() === 0);",
+            vec![],
+        )
         .await;
     assert_eq!(offsets, json!(true));
     click(&browser, "#overlay").await;
 
     // The correction: input and corrected clip, learning curve, criteria, bars.
-    click(&browser, "li.clip[data-name='16_11_walk_veer_left (corrected)']").await;
+    click(
+        &browser,
+        "li.clip[data-name='16_11_walk_veer_left (corrected)']",
+    )
+    .await;
     loaded(&browser, 2).await;
     browser
         .wait_for("document.querySelectorAll('.panel.curve canvas').length >= 2 && document.querySelector('table.criteria')", "the correction's panels")
@@ -197,7 +245,10 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     let report: Value =
         serde_json::from_slice(&std::fs::read(corr.join("report.json")).unwrap()).unwrap();
     let points = browser
-        .eval("return document.querySelector('.panel.curve').plots[0].data[1];", vec![])
+        .eval(
+            "return document.querySelector('.panel.curve').plots[0].data[1];",
+            vec![],
+        )
         .await;
     let curve: Vec<f64> = report["curve"]
         .as_array()
@@ -207,17 +258,29 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
         .collect();
     assert_eq!(points, json!(curve));
     let drawn = colored_pixels(&browser, ".panel.curve canvas", [0x3b, 0x7c, 0xff]).await;
-    assert!(drawn > 30, "the curve is not drawn ({drawn} pixels of its colour)");
+    assert!(
+        drawn > 30,
+        "the curve is not drawn ({drawn} pixels of its colour)"
+    );
     let rows = browser
-        .eval("return document.querySelectorAll('table.criteria tr').length - 1;", vec![])
+        .eval(
+            "return document.querySelectorAll('table.criteria tr').length - 1;",
+            vec![],
+        )
         .await;
     assert_eq!(rows, json!(report["criteria"].as_array().unwrap().len()));
     let bars = browser
-        .eval("return document.querySelectorAll('svg.bars rect').length;", vec![])
+        .eval(
+            "return document.querySelectorAll('svg.bars rect').length;",
+            vec![],
+        )
         .await;
     assert!(bars.as_u64().unwrap() >= 8, "{bars}");
     browser
-        .eval("document.querySelector('#panels').scrollIntoView(); return 0;", vec![])
+        .eval(
+            "document.querySelector('#panels').scrollIntoView(); return 0;",
+            vec![],
+        )
         .await;
     tokio::time::sleep(Duration::from_millis(200)).await;
     save(&browser.screenshot().await, "viewer-correction");

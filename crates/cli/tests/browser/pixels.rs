@@ -97,7 +97,10 @@ pub fn save(png: &str, name: &str) {
         let bytes = base64::engine::general_purpose::STANDARD
             .decode(png)
             .expect("base64 PNG");
-        std::fs::write(std::path::Path::new(&dir).join(format!("{name}.png")), bytes)
-            .expect("screenshot written");
+        std::fs::write(
+            std::path::Path::new(&dir).join(format!("{name}.png")),
+            bytes,
+        )
+        .expect("screenshot written");
     }
 }

@@ -55,8 +55,12 @@ impl App {
         let base = format!("http://127.0.0.1:{}", app.port());
         let db = app.state().db.clone();
         let server = tokio::spawn(app.run_until_stopped(std::future::pending()));
-        let alpha = motionaug_coordinator::auth::create_key(&db, "alpha").await.unwrap();
-        let beta = motionaug_coordinator::auth::create_key(&db, "beta").await.unwrap();
+        let alpha = motionaug_coordinator::auth::create_key(&db, "alpha")
+            .await
+            .unwrap();
+        let beta = motionaug_coordinator::auth::create_key(&db, "beta")
+            .await
+            .unwrap();
         App {
             base,
             db_name,
@@ -72,7 +76,12 @@ impl App {
     }
 
     async fn get(&self, key: &str, path: &str) -> reqwest::Response {
-        self.http.get(self.url(path)).bearer_auth(key).send().await.unwrap()
+        self.http
+            .get(self.url(path))
+            .bearer_auth(key)
+            .send()
+            .await
+            .unwrap()
     }
 
     async fn worker(&self, path: &str, body: Value) -> reqwest::Response {
@@ -98,7 +107,9 @@ impl Drop for App {
             rt.block_on(async {
                 if let Ok(mut admin) = PgConnection::connect(ADMIN_URL).await {
                     let sql = format!("DROP DATABASE IF EXISTS {name} WITH (FORCE)");
-                    let _ = sqlx::query(sqlx::AssertSqlSafe(sql)).execute(&mut admin).await;
+                    let _ = sqlx::query(sqlx::AssertSqlSafe(sql))
+                        .execute(&mut admin)
+                        .await;
                 }
             });
         })
@@ -147,37 +158,65 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
 
     // The test is the worker: it claims the synthesis job and reports progress.
     let job: Value = app
-        .worker("/jobs/claim", json!({"worker_id": "browser-test", "kinds": ["synthesize"], "wait_ms": 0}))
+        .worker(
+            "/jobs/claim",
+            json!({"worker_id": "browser-test", "kinds": ["synthesize"], "wait_ms": 0}),
+        )
         .await
         .json()
         .await
         .unwrap();
-    let (job_id, epoch) = (job["id"].as_str().unwrap().to_string(), job["epoch"].clone());
+    let (job_id, epoch) = (
+        job["id"].as_str().unwrap().to_string(),
+        job["epoch"].clone(),
+    );
     let heartbeat = format!("/jobs/{job_id}/heartbeat");
-    let beat = |progress: f64| app.worker(&heartbeat, json!({"epoch": epoch, "progress": progress}));
+    let beat =
+        |progress: f64| app.worker(&heartbeat, json!({"epoch": epoch, "progress": progress}));
     assert!(beat(0.2).await.status().is_success());
 
     browser.goto(&app.url("/viewer")).await;
-    browser.wait_for("document.getElementById('login') && !document.getElementById('login').hidden", "the key form").await;
     browser
-        .eval("localStorage.setItem('motionaug.key', arguments[0]); return 0;", vec![json!(app.alpha)])
+        .wait_for(
+            "document.getElementById('login') && !document.getElementById('login').hidden",
+            "the key form",
+        )
+        .await;
+    browser
+        .eval(
+            "localStorage.setItem('motionaug.key', arguments[0]); return 0;",
+            vec![json!(app.alpha)],
+        )
         .await;
     browser
         .goto(&app.url(&format!("/viewer/?dataset={dataset}&augmentation={aug}")))
         .await;
     let item = format!("document.querySelector('li.augmentation[data-id=\"{aug}\"]')");
     let first = browser
-        .wait_for(&format!("{item} && Number({item}.dataset.progress) > 0 && Number({item}.dataset.progress)"), "progress")
+        .wait_for(
+            &format!(
+                "{item} && Number({item}.dataset.progress) > 0 && Number({item}.dataset.progress)"
+            ),
+            "progress",
+        )
         .await
         .as_f64()
         .unwrap();
     let listed = browser
-        .eval("return [...document.querySelectorAll('#dataset-list li')].map(li => li.dataset.id);", vec![])
+        .eval(
+            "return [...document.querySelectorAll('#dataset-list li')].map(li => li.dataset.id);",
+            vec![],
+        )
         .await;
     assert_eq!(listed, json!([dataset]));
     assert!(beat(0.7).await.status().is_success());
     let later = browser
-        .wait_for(&format!("Number({item}.dataset.progress) > {first} && Number({item}.dataset.progress)"), "progress to advance")
+        .wait_for(
+            &format!(
+                "Number({item}.dataset.progress) > {first} && Number({item}.dataset.progress)"
+            ),
+            "progress to advance",
+        )
         .await
         .as_f64()
         .unwrap();
@@ -185,7 +224,8 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
     save(&browser.screenshot().await, "viewer-service-progress");
 
     // The job's outputs, made by the pipeline as a worker would, then played.
-    let motion = motion::io::parse_bvh(&walk, "16_11_walk_veer_left.bvh", motion::Unit::Auto).unwrap();
+    let motion =
+        motion::io::parse_bvh(&walk, "16_11_walk_veer_left.bvh", motion::Unit::Auto).unwrap();
     let work = tempfile::tempdir().unwrap();
     let summary = pipeline::run(
         &pipeline::Recipe::from_value(recipe.clone()).unwrap(),
@@ -210,7 +250,9 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
         {
             let r = app
                 .http
-                .put(app.url(&format!("/internal/v1/jobs/{job_id}/artifacts/{name}?epoch={epoch}")))
+                .put(app.url(&format!(
+                    "/internal/v1/jobs/{job_id}/artifacts/{name}?epoch={epoch}"
+                )))
                 .bearer_auth(WORKER_TOKEN)
                 .body(bytes)
                 .send()
@@ -250,7 +292,10 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
     tokio::time::sleep(Duration::from_millis(300)).await;
     let shot = browser.screenshot().await;
     let stats = canvas_stats(&browser, &shot).await;
-    assert!(stats["saturated"].as_u64().unwrap() > 300, "no skeleton drawn: {stats}");
+    assert!(
+        stats["saturated"].as_u64().unwrap() > 300,
+        "no skeleton drawn: {stats}"
+    );
     save(&shot, "viewer-service");
     let errors = browser.console_errors().await;
     assert!(errors.is_empty(), "console errors: {errors:?}");
@@ -268,16 +313,25 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
         assert_eq!(app.get(&app.alpha, &path).await.status(), 200, "{path}");
     }
     browser
-        .eval("localStorage.setItem('motionaug.key', arguments[0]); return 0;", vec![json!(app.beta)])
+        .eval(
+            "localStorage.setItem('motionaug.key', arguments[0]); return 0;",
+            vec![json!(app.beta)],
+        )
         .await;
     browser
         .goto(&app.url(&format!("/viewer/?augmentation={aug}")))
         .await;
     browser
-        .wait_for("document.getElementById('status').textContent.includes('404')", "a 404")
+        .wait_for(
+            "document.getElementById('status').textContent.includes('404')",
+            "a 404",
+        )
         .await;
     let clips = browser
-        .eval("return document.querySelectorAll('#clip-list li.clip').length;", vec![])
+        .eval(
+            "return document.querySelectorAll('#clip-list li.clip').length;",
+            vec![],
+        )
         .await;
     assert_eq!(clips, json!(0));
     browser.close().await;

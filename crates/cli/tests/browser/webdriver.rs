@@ -42,7 +42,9 @@ impl Browser {
                 std::env::var_os("MOTIONAUG_REQUIRE_BROWSER").is_none(),
                 "{driver_bin} not found: apt-get install chromium chromium-driver"
             );
-            eprintln!("note: {driver_bin} not found (apt-get install chromium chromium-driver); browser test skipped");
+            eprintln!(
+                "note: {driver_bin} not found (apt-get install chromium chromium-driver); browser test skipped"
+            );
             return None;
         }
         let port = free_port();
@@ -90,7 +92,9 @@ impl Browser {
             base,
             _profile: profile,
         };
-        let created = browser.call(reqwest::Method::POST, "/session", Some(caps)).await;
+        let created = browser
+            .call(reqwest::Method::POST, "/session", Some(caps))
+            .await;
         browser.session = created["sessionId"]
             .as_str()
             .unwrap_or_else(|| panic!("no session: {created}"))
@@ -105,7 +109,10 @@ impl Browser {
         if let Some(body) = body {
             request = request.json(&body);
         }
-        let response = request.send().await.unwrap_or_else(|e| panic!("{url}: {e}"));
+        let response = request
+            .send()
+            .await
+            .unwrap_or_else(|e| panic!("{url}: {e}"));
         let status = response.status();
         let value: Value = response.json().await.unwrap_or(Value::Null);
         assert!(status.is_success(), "{url}: {status} {value}");
@@ -117,8 +124,12 @@ impl Browser {
     }
 
     pub async fn goto(&self, url: &str) {
-        self.call(reqwest::Method::POST, &self.at("url"), Some(json!({"url": url})))
-            .await;
+        self.call(
+            reqwest::Method::POST,
+            &self.at("url"),
+            Some(json!({"url": url})),
+        )
+        .await;
     }
 
     /// Runs `script` (a function body; `arguments` holds `args`) in the page.
@@ -146,14 +157,20 @@ impl Browser {
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             let v = self
-                .eval(&format!("try {{ return ({condition}); }} catch (e) {{ return null; }}"), vec![])
+                .eval(
+                    &format!("try {{ return ({condition}); }} catch (e) {{ return null; }}"),
+                    vec![],
+                )
                 .await;
             if !(v.is_null() || v == json!(false) || v == json!(0) || v == json!("")) {
                 return v;
             }
             if Instant::now() > deadline {
                 let status = self
-                    .eval("return document.getElementById('status')?.textContent", vec![])
+                    .eval(
+                        "return document.getElementById('status')?.textContent",
+                        vec![],
+                    )
                     .await;
                 panic!("timed out waiting for {what} ({condition}); page status: {status}");
             }
@@ -173,7 +190,11 @@ impl Browser {
     /// The console's error messages since the last call.
     pub async fn console_errors(&self) -> Vec<String> {
         let entries = self
-            .call(reqwest::Method::POST, &self.at("se/log"), Some(json!({"type": "browser"})))
+            .call(
+                reqwest::Method::POST,
+                &self.at("se/log"),
+                Some(json!({"type": "browser"})),
+            )
             .await;
         entries
             .as_array()

@@ -314,7 +314,14 @@ fn stem(name: &str) -> String {
 }
 
 /// A job row of an augmentation.
-type JobRow = (String, String, String, f64, Option<sqlx::types::Json<Value>>, Option<String>);
+type JobRow = (
+    String,
+    String,
+    String,
+    f64,
+    Option<sqlx::types::Json<Value>>,
+    Option<String>,
+);
 
 async fn jobs(state: &AppState, augmentation: Uuid) -> Result<Vec<JobRow>, ApiError> {
     Ok(sqlx::query_as(
@@ -346,14 +353,20 @@ async fn augmentation_dataset(
     Ok((dataset.id, dataset.name))
 }
 
-async fn artifact(state: &AppState, augmentation: Uuid, name: &str) -> Result<Option<Vec<u8>>, ApiError> {
-    Ok(sqlx::query_scalar(
-        "SELECT content FROM artifacts WHERE augmentation_id = $1 AND name = $2",
+async fn artifact(
+    state: &AppState,
+    augmentation: Uuid,
+    name: &str,
+) -> Result<Option<Vec<u8>>, ApiError> {
+    Ok(
+        sqlx::query_scalar(
+            "SELECT content FROM artifacts WHERE augmentation_id = $1 AND name = $2",
+        )
+        .bind(augmentation)
+        .bind(name)
+        .fetch_optional(&state.db)
+        .await?,
     )
-    .bind(augmentation)
-    .bind(name)
-    .fetch_optional(&state.db)
-    .await?)
 }
 
 fn role_of(entry: &Value) -> Role {
@@ -413,7 +426,15 @@ pub async fn augmentation_library(
             };
             let item = Descriptor {
                 id: work.file.clone(),
-                name: format!("{} ({})", work.name, if role == Role::Corrected { "corrected" } else { "synthesised" }),
+                name: format!(
+                    "{} ({})",
+                    work.name,
+                    if role == Role::Corrected {
+                        "corrected"
+                    } else {
+                        "synthesised"
+                    }
+                ),
                 group: group_of(&work.entry),
                 role,
                 entry: Some(work.entry.clone()),
@@ -424,17 +445,29 @@ pub async fn augmentation_library(
                 listed: false,
                 urls: view_urls(&work.file, None, false),
             };
-            versions.entry(work.name.clone()).or_default().push(work.file.clone());
+            versions
+                .entry(work.name.clone())
+                .or_default()
+                .push(work.file.clone());
             clips.push(item.into());
         }
-        finals.extend(output.manifest.into_iter().zip(std::iter::repeat(kind.clone())));
+        finals.extend(
+            output
+                .manifest
+                .into_iter()
+                .zip(std::iter::repeat(kind.clone())),
+        );
     }
     let mut listed = Vec::new();
     for source in &sources {
         listed.push(source_item(dataset, &dataset_name, source));
     }
     for (entry, _) in finals {
-        let Some(file) = entry.get("file").and_then(Value::as_str).map(str::to_string) else {
+        let Some(file) = entry
+            .get("file")
+            .and_then(Value::as_str)
+            .map(str::to_string)
+        else {
             continue;
         };
         let name = stem(&file);
@@ -460,7 +493,14 @@ pub async fn augmentation_library(
                         masked: false,
                         versions: vec![original.clone()],
                         listed: false,
-                        urls: view_urls(&original, Some(format!("{base}/files/{}", artifacts::original_report(&group))), false),
+                        urls: view_urls(
+                            &original,
+                            Some(format!(
+                                "{base}/files/{}",
+                                artifacts::original_report(&group)
+                            )),
+                            false,
+                        ),
                     }
                     .into(),
                 );
@@ -499,9 +539,15 @@ pub async fn augmentation_library(
         }
         let Some(clip) = clip.clone() else { continue };
         let (report_name, curve_name) = if kind == "correct_original" {
-            (artifacts::original_report(&clip), artifacts::original_curve(&clip))
+            (
+                artifacts::original_report(&clip),
+                artifacts::original_curve(&clip),
+            )
         } else {
-            (artifacts::correction_report(&clip), artifacts::correction_curve(&clip))
+            (
+                artifacts::correction_report(&clip),
+                artifacts::correction_curve(&clip),
+            )
         };
         let report: Option<Value> = artifact(&state, id, &report_name)
             .await?
@@ -567,13 +613,12 @@ pub async fn augmentation_clip_view(
     Query(page): Query<Page>,
 ) -> Result<Response, ApiError> {
     let (dataset, _) = augmentation_dataset(&state, &tenant, id).await?;
-    let sha: Option<Vec<u8>> = sqlx::query_scalar(
-        "SELECT sha256 FROM artifacts WHERE augmentation_id = $1 AND name = $2",
-    )
-    .bind(id)
-    .bind(&file)
-    .fetch_optional(&state.db)
-    .await?;
+    let sha: Option<Vec<u8>> =
+        sqlx::query_scalar("SELECT sha256 FROM artifacts WHERE augmentation_id = $1 AND name = $2")
+            .bind(id)
+            .bind(&file)
+            .fetch_optional(&state.db)
+            .await?;
     let sha = sha.ok_or_else(|| ApiError::not_found("file"))?;
     let key = format!("artifact:{id}:{}", hex(&sha));
     if let Some(view) = cache_get(&key) {
@@ -585,7 +630,12 @@ pub async fn augmentation_clip_view(
     let name = stem(&file);
     // An output's mask is in its NPZ; its IK edit in its manifest entry.
     let mask_npz = if file.ends_with(".bvh") {
-        artifact(&state, id, &format!("{}.npz", file.trim_end_matches(".bvh"))).await?
+        artifact(
+            &state,
+            id,
+            &format!("{}.npz", file.trim_end_matches(".bvh")),
+        )
+        .await?
     } else {
         None
     };
@@ -595,19 +645,27 @@ pub async fn augmentation_clip_view(
         o.manifest
             .into_iter()
             .find(|e| e.get("file").and_then(Value::as_str) == Some(file.as_str()))
-            .or_else(|| o.clips.into_iter().find(|c| c.file == file).map(|c| c.entry))
+            .or_else(|| {
+                o.clips
+                    .into_iter()
+                    .find(|c| c.file == file)
+                    .map(|c| c.entry)
+            })
     });
     let source_fps: Option<f64> = match &entry {
-        Some(e) => sqlx::query_scalar("SELECT fps FROM clips WHERE dataset_id = $1 AND name = $2")
-            .bind(dataset)
-            .bind(group_of(e))
-            .fetch_optional(&state.db)
-            .await?,
+        Some(e) => {
+            sqlx::query_scalar("SELECT fps FROM clips WHERE dataset_id = $1 AND name = $2")
+                .bind(dataset)
+                .bind(group_of(e))
+                .fetch_optional(&state.db)
+                .await?
+        }
         None => None,
     };
     let view = cached(&key, move || {
         let (motion, mask) = if file.ends_with(".bvh") {
-            let m = motion::io::parse_bvh(&content, &file, motion::Unit::Auto).map_err(|e| e.to_string())?;
+            let m = motion::io::parse_bvh(&content, &file, motion::Unit::Auto)
+                .map_err(|e| e.to_string())?;
             let mask = mask_npz.and_then(|b| {
                 motion::npz::read(&b)
                     .ok()?
@@ -624,7 +682,8 @@ pub async fn augmentation_clip_view(
             }
         };
         let mask = mask.filter(|m| m.len() == motion.frames() * motion.joints());
-        let mut view = ClipView::from_motion(&name, &motion, mask.as_deref()).map_err(|e| e.to_string())?;
+        let mut view =
+            ClipView::from_motion(&name, &motion, mask.as_deref()).map_err(|e| e.to_string())?;
         if let Some(e) = &entry {
             let synth_fps = if e.get("correction").is_some_and(|c| !c.is_null()) {
                 source_fps
@@ -736,7 +795,9 @@ async fn cached(
 }
 
 fn part_response(view: &ClipView, part: &str, page: &Page) -> Result<Response, ApiError> {
-    let binary = |bytes: Vec<u8>| ([(header::CONTENT_TYPE, "application/octet-stream")], bytes).into_response();
+    let binary = |bytes: Vec<u8>| {
+        ([(header::CONTENT_TYPE, "application/octet-stream")], bytes).into_response()
+    };
     match part {
         "meta" => Ok(Json(view.meta().clone()).into_response()),
         "flags" => Ok(binary(view.flags().to_vec())),
