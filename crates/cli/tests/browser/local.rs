@@ -289,3 +289,76 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
     assert!(errors.is_empty(), "console errors: {errors:?}");
     browser.close().await;
 }
+
+/// Load time and frame rate of a 10-minute clip at 120 Hz (72 000 frames, the
+/// bundled walk repeated) beside the 4.5 s walk itself, in one run. A
+/// measurement, not a check: run it with
+/// `cargo test --release -p motionaug-cli --test browser -- --ignored --nocapture`.
+#[tokio::test(flavor = "multi_thread")]
+#[ignore = "a measurement; prints figures"]
+async fn measure_a_ten_minute_clip() {
+    let _one = crate::serial().await;
+    crate::bundled();
+    let Some(browser) = Browser::start().await else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let walk = motion::load(
+        crate::common::example("16_11_walk_veer_left.bvh"),
+        &motion::LoadOptions::default(),
+    )
+    .unwrap();
+    let frames = 10 * 60 * 120;
+    let n = walk.frames();
+    let root: Vec<_> = (0..frames).map(|t| walk.root_translation()[t % n]).collect();
+    let rotations: Vec<_> = (0..frames).flat_map(|t| walk.pose(t % n).to_vec()).collect();
+    let long = motion::Motion::new(walk.skeleton().clone(), walk.fps(), root, rotations).unwrap();
+    motion::save(&long, tmp.path().join("ten_minutes.bvh")).unwrap();
+    motion::save(&walk, tmp.path().join("walk.bvh")).unwrap();
+    let (_server, url) = view(&[tmp.path()]);
+    browser.goto(&url).await;
+    browser.wait_for("window.__viewer.ready", "the page").await;
+    println!("clip              frames  MB sent  load s  fps playing (1x)  pose ms  render ms");
+    for name in ["walk", "ten_minutes"] {
+        browser
+            .eval("window.__viewer.openedAt = performance.now(); return 0;", vec![])
+            .await;
+        click(&browser, &format!("li.clip[data-name='{name}']")).await;
+        let first = browser
+            .wait_for(
+                "window.__viewer.player.tracks.length === 1 && window.__viewer.player.tracks[0].shownFrame >= 0 && performance.now() - window.__viewer.openedAt",
+                "the first frame",
+            )
+            .await;
+        loaded(&browser, 1).await;
+        let load = browser.eval("return window.__viewer.player.loadSeconds;", vec![]).await;
+        let bytes = browser
+            .eval("const t = window.__viewer.player.tracks[0]; return t.positions.byteLength + t.flags.byteLength;", vec![])
+            .await;
+        click(&browser, "#play").await;
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let start = browser
+            .eval("return [window.__viewer.player.rendered, performance.now()];", vec![])
+            .await;
+        tokio::time::sleep(Duration::from_secs(5)).await;
+        let end = browser
+            .eval("return [window.__viewer.player.rendered, performance.now()];", vec![])
+            .await;
+        let costs = browser
+            .eval("return [window.__viewer.player.poseMs, window.__viewer.player.renderMs];", vec![])
+            .await;
+        click(&browser, "#play").await;
+        let fps = (end[0].as_f64().unwrap() - start[0].as_f64().unwrap())
+            / ((end[1].as_f64().unwrap() - start[1].as_f64().unwrap()) / 1000.0);
+        println!(
+            "{name:<16} {:>7}  {:>7.1}  {:>6.2}  {fps:>5.1}            {:>6.2}  {:>6.2}   (first frame after {:.2} s)",
+            browser.eval("return window.__viewer.player.tracks[0].frames;", vec![]).await,
+            bytes.as_f64().unwrap() / 1e6,
+            load.as_f64().unwrap(),
+            costs[0].as_f64().unwrap(),
+            costs[1].as_f64().unwrap(),
+            first.as_f64().unwrap() / 1000.0,
+        );
+    }
+    browser.close().await;
+}

@@ -369,12 +369,19 @@ export class Player {
       this.dirty = true;
     }
     if (this.dirty) {
+      const posing = performance.now();
       for (const t of this.tracks) {
         const f = t.frameAt(this.time);
         if (f < t.loaded && f !== t.shownFrame) t.show(f);
         t.group.visible = t.shownFrame >= 0;
       }
+      const rendering = performance.now();
       this.renderer.render(this.scene, this.camera);
+      // Milliseconds per drawn frame (moving averages): posing the
+      // skeletons from the frame data, and handing the scene to WebGL.
+      const done = performance.now();
+      this.poseMs = 0.9 * (this.poseMs || 0) + 0.1 * (rendering - posing);
+      this.renderMs = 0.9 * (this.renderMs || 0) + 0.1 * (done - rendering);
       this.rendered++;
       this.fpsWindow.frames++;
       this.dirty = false;
