@@ -147,7 +147,7 @@ function playerUi() {
         const sw = span("swatch", "");
         sw.style.background = `#${t.color.getHexString()}`;
         const item = span("", "");
-        item.append(sw, `${t.clip.name} (${t.clip.role})`);
+        item.append(sw, t.clip.name.includes(`(${t.clip.role})`) ? t.clip.name : `${t.clip.name} (${t.clip.role})`);
         legend.append(item);
       }
       const keys = $("keyframes");
