@@ -310,8 +310,12 @@ async fn measure_a_ten_minute_clip() {
     .unwrap();
     let frames = 10 * 60 * 120;
     let n = walk.frames();
-    let root: Vec<_> = (0..frames).map(|t| walk.root_translation()[t % n]).collect();
-    let rotations: Vec<_> = (0..frames).flat_map(|t| walk.pose(t % n).to_vec()).collect();
+    let root: Vec<_> = (0..frames)
+        .map(|t| walk.root_translation()[t % n])
+        .collect();
+    let rotations: Vec<_> = (0..frames)
+        .flat_map(|t| walk.pose(t % n).to_vec())
+        .collect();
     let long = motion::Motion::new(walk.skeleton().clone(), walk.fps(), root, rotations).unwrap();
     motion::save(&long, tmp.path().join("ten_minutes.bvh")).unwrap();
     motion::save(&walk, tmp.path().join("walk.bvh")).unwrap();
@@ -321,7 +325,10 @@ async fn measure_a_ten_minute_clip() {
     println!("clip              frames  MB sent  load s  fps playing (1x)  pose ms  render ms");
     for name in ["walk", "ten_minutes"] {
         browser
-            .eval("window.__viewer.openedAt = performance.now(); return 0;", vec![])
+            .eval(
+                "window.__viewer.openedAt = performance.now(); return 0;",
+                vec![],
+            )
             .await;
         click(&browser, &format!("li.clip[data-name='{name}']")).await;
         let first = browser
@@ -331,28 +338,41 @@ async fn measure_a_ten_minute_clip() {
             )
             .await;
         loaded(&browser, 1).await;
-        let load = browser.eval("return window.__viewer.player.loadSeconds;", vec![]).await;
+        let load = browser
+            .eval("return window.__viewer.player.loadSeconds;", vec![])
+            .await;
         let bytes = browser
             .eval("const t = window.__viewer.player.tracks[0]; return t.positions.byteLength + t.flags.byteLength;", vec![])
             .await;
         click(&browser, "#play").await;
         tokio::time::sleep(Duration::from_millis(500)).await;
         let start = browser
-            .eval("return [window.__viewer.player.rendered, performance.now()];", vec![])
+            .eval(
+                "return [window.__viewer.player.rendered, performance.now()];",
+                vec![],
+            )
             .await;
         tokio::time::sleep(Duration::from_secs(5)).await;
         let end = browser
-            .eval("return [window.__viewer.player.rendered, performance.now()];", vec![])
+            .eval(
+                "return [window.__viewer.player.rendered, performance.now()];",
+                vec![],
+            )
             .await;
         let costs = browser
-            .eval("return [window.__viewer.player.poseMs, window.__viewer.player.renderMs];", vec![])
+            .eval(
+                "return [window.__viewer.player.poseMs, window.__viewer.player.renderMs];",
+                vec![],
+            )
             .await;
         click(&browser, "#play").await;
         let fps = (end[0].as_f64().unwrap() - start[0].as_f64().unwrap())
             / ((end[1].as_f64().unwrap() - start[1].as_f64().unwrap()) / 1000.0);
         println!(
             "{name:<16} {:>7}  {:>7.1}  {:>6.2}  {fps:>5.1}            {:>6.2}  {:>6.2}   (first frame after {:.2} s)",
-            browser.eval("return window.__viewer.player.tracks[0].frames;", vec![]).await,
+            browser
+                .eval("return window.__viewer.player.tracks[0].frames;", vec![])
+                .await,
             bytes.as_f64().unwrap() / 1e6,
             load.as_f64().unwrap(),
             costs[0].as_f64().unwrap(),
