@@ -11,6 +11,11 @@ pub struct Asset {
 
 include!(concat!(env!("OUT_DIR"), "/assets.rs"));
 
+/// Whether the real page is embedded (not the notice that says how to build it).
+pub fn bundled() -> bool {
+    BUNDLED
+}
+
 /// The file at `path` (`""` and `"/"` are `index.html`).
 pub fn get(path: &str) -> Option<&'static Asset> {
     let path = path.trim_start_matches('/');

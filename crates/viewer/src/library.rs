@@ -698,7 +698,7 @@ mod tests {
     #[test]
     fn hdm05_clips_find_their_skeleton() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
-        let lib = scan(&[dir.clone()], &ScanOptions::default()).unwrap();
+        let lib = scan(std::slice::from_ref(&dir), &ScanOptions::default()).unwrap();
         let kick = lib
             .clips
             .iter()

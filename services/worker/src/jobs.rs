@@ -36,6 +36,9 @@ use crate::client::with_retries;
 use crate::runner::{JobContext, JobFailure, Outcome, Stop};
 use crate::transfer::{fetch, proceed, test_pause, upload};
 
+/// A correction's learning curve so far: [wall_s, samples, r_norm] per rollout.
+type Curve = Arc<Mutex<Vec<[f64; 3]>>>;
+
 /// Runs the claimed job `ctx.job` to its end, or until it must stop.
 pub async fn run(ctx: Arc<JobContext>) -> Result<Outcome, JobFailure> {
     let input: PipelineInput = serde_json::from_value(ctx.job.input.clone())
@@ -94,7 +97,7 @@ async fn run_in(
     let correction_dir = is_correction(&job).then(|| run_dir.clone());
     let stop = Arc::new(AtomicBool::new(false));
     // The learning curve so far, uploaded while the correction trains.
-    let curve = Arc::new(Mutex::new(Vec::<[f64; 3]>::new()));
+    let curve: Curve = Arc::new(Mutex::new(Vec::new()));
     let live_curve = match &job.kind {
         JobKind::Correct { clip, .. } => Some(artifacts::correction_curve(clip)),
         JobKind::CorrectOriginal { clip, .. } => Some(artifacts::original_curve(clip)),
@@ -183,7 +186,7 @@ async fn watch(
     mut task: tokio::task::JoinHandle<Result<JobOutput, PipelineError>>,
     stop: &AtomicBool,
     correction_dir: Option<PathBuf>,
-    live_curve: Option<(String, Arc<Mutex<Vec<[f64; 3]>>>)>,
+    live_curve: Option<(String, Curve)>,
 ) -> Result<JobOutput, PipelineError> {
     let checkpoints = correction_dir.map(|d| d.join("checkpoints"));
     let mut uploaded: Option<PathBuf> = None;

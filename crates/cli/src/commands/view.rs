@@ -56,7 +56,7 @@ type Shared = Arc<Served>;
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
-        viewer::assets::BUNDLED,
+        viewer::assets::bundled(),
         "this motionaug was built without its viewer page: {}",
         viewer::assets::MISSING_BECAUSE
     );

@@ -19,7 +19,7 @@ pub async fn serial() -> tokio::sync::MutexGuard<'static, ()> {
 /// The viewer was built (Node.js and npm were there): the tests need the page.
 pub fn bundled() {
     assert!(
-        viewer::assets::BUNDLED,
+        viewer::assets::bundled(),
         "the viewer page was not built: {}",
         viewer::assets::MISSING_BECAUSE
     );

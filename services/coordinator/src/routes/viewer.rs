@@ -255,6 +255,9 @@ pub async fn dataset_library(
     }))
 }
 
+/// A stored clip: file name, bytes, ASF name and bytes, frame rate.
+type StoredClip = (String, Vec<u8>, Option<String>, Option<Vec<u8>>, f64);
+
 /// A dataset clip's meta, frames or flags
 #[utoipa::path(
     get,
@@ -281,7 +284,7 @@ pub async fn dataset_clip_view(
     Query(page): Query<Page>,
 ) -> Result<Response, ApiError> {
     datasets::find(&state, &tenant, id).await?;
-    let row: Option<(String, Vec<u8>, Option<String>, Option<Vec<u8>>, f64)> = sqlx::query_as(
+    let row: Option<StoredClip> = sqlx::query_as(
         "SELECT source_name, source, skeleton_name, skeleton, fps FROM clips
          WHERE id = $1 AND dataset_id = $2",
     )
@@ -761,8 +764,10 @@ fn hex(bytes: &[u8]) -> String {
 /// Prepared clips of this process, most recent last.
 const CACHED_CLIPS: usize = 16;
 
-fn cache() -> &'static Mutex<VecDeque<(String, Arc<ClipView>)>> {
-    static CACHE: OnceLock<Mutex<VecDeque<(String, Arc<ClipView>)>>> = OnceLock::new();
+type Cache = Mutex<VecDeque<(String, Arc<ClipView>)>>;
+
+fn cache() -> &'static Cache {
+    static CACHE: OnceLock<Cache> = OnceLock::new();
     CACHE.get_or_init(|| Mutex::new(VecDeque::new()))
 }
 
