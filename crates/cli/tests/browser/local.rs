@@ -151,6 +151,13 @@ async fn local_viewer_lists_plays_and_draws_a_correction() {
         )
         .await;
     assert_eq!(roles, json!(["source", "synthesised"]));
+    let links = browser
+        .eval(
+            "return document.querySelectorAll('#panels a.file').length;",
+            vec![],
+        )
+        .await;
+    assert_eq!(links, json!(2), "both files can be downloaded");
     let contacts = browser
         .eval(
             "return window.__viewer.player.tracks[0].flags.some(f => f & 2);",

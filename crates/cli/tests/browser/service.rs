@@ -297,6 +297,13 @@ async fn service_viewer_follows_an_augmentation_and_hides_it_from_other_tenants(
         "no skeleton drawn: {stats}"
     );
     save(&shot, "viewer-service");
+    let links = browser
+        .eval(
+            "return [...document.querySelectorAll('#panels a.file')].map(a => a.textContent);",
+            vec![],
+        )
+        .await;
+    assert_eq!(links, json!([first_output]), "the output can be downloaded");
     let errors = browser.console_errors().await;
     assert!(errors.is_empty(), "console errors: {errors:?}");
 

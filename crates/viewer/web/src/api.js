@@ -44,9 +44,13 @@ export async function binary(url) {
   return (await checked(url)).arrayBuffer();
 }
 
-/// Downloads `url` (which needs the key) as a file named `name`.
+/// Downloads `url` (which needs the key) as a file: the name the server
+/// gives (Content-Disposition), else `name`.
 export async function download(url, name) {
-  const blob = await (await checked(url)).blob();
+  const response = await checked(url);
+  const given = /filename="([^"]+)"/.exec(response.headers.get("content-disposition") || "");
+  if (given) name = given[1];
+  const blob = await response.blob();
   const link = document.createElement("a");
   link.href = URL.createObjectURL(blob);
   link.download = name;

@@ -114,6 +114,24 @@ async function openClips(ids) {
 async function showPanels(clips) {
   const panels = $("panels");
   panels.replaceChildren();
+  const files = clips.filter((c) => c.urls.download);
+  if (files.length) {
+    const box = document.createElement("div");
+    box.className = "panel files";
+    box.append("Download: ");
+    for (const c of files) {
+      const link = document.createElement("a");
+      link.href = "#";
+      link.className = "file";
+      link.textContent = c.name;
+      link.addEventListener("click", (e) => {
+        e.preventDefault();
+        download(c.urls.download, c.name).catch((err) => status(err.message, true));
+      });
+      box.append(link, " ");
+    }
+    panels.append(box);
+  }
   for (const c of clips) {
     const summary = c.entry && c.entry.correction;
     if (!c.urls.report && !summary) continue;
