@@ -79,8 +79,8 @@ fn run(command: &mut Command, what: &str) -> Result<(), String> {
     let output = command.output().map_err(|e| {
         format!(
             "`{what}` could not start ({e}). Install Node.js (18 or newer) and npm, e.g. \
-             `apt-get install nodejs npm`, then build again; everything but `motionaug view` \
-             and the service's /viewer works without them"
+             `apt-get install nodejs npm`, then `cargo clean -p viewer` and build again; everything \
+             but `motionaug view` and the service's /viewer works without them"
         )
     })?;
     if output.status.success() {

@@ -463,7 +463,7 @@ pub async fn augmentation_library(
     }
     let mut listed = Vec::new();
     for source in &sources {
-        listed.push(source_item(dataset, &dataset_name, source));
+        listed.push(source_item(dataset, &source.1, source));
     }
     for (entry, _) in finals {
         let Some(file) = entry
@@ -532,6 +532,8 @@ pub async fn augmentation_library(
         };
         listed.push(item.into());
     }
+    // Each source with its outputs (stable: sources first, outputs in job order).
+    listed.sort_by(|a, b| a.group.cmp(&b.group));
     listed.extend(clips);
 
     let mut corrections = Vec::new();
