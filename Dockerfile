@@ -7,6 +7,10 @@
 # beyond glibc (Postgres and Redis are reached over plain TCP inside the cluster).
 
 FROM rust:1.95-slim-bookworm AS build
+# Node.js and npm bundle the coordinator's viewer page (crates/viewer/build.rs).
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends nodejs npm \
+ && rm -rf /var/lib/apt/lists/*
 WORKDIR /src
 COPY . .
 RUN cargo build --release -p motionaug-coordinator -p motionaug-worker \

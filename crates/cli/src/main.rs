@@ -45,6 +45,8 @@ enum Command {
     Debias(commands::debias::Args),
     /// Evaluate augmentations: min DTW / MMD, and motion prediction with and without them.
     Eval(commands::eval::Args),
+    /// Serve the viewer page for augment outputs or clips: play them in 3D, see corrections' curves.
+    View(commands::view::Args),
 }
 
 fn main() -> ExitCode {
@@ -67,6 +69,7 @@ fn main() -> ExitCode {
         Command::Vae(args) => commands::vae::run(args),
         Command::Debias(args) => commands::debias::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::View(args) => commands::view::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

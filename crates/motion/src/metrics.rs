@@ -121,6 +121,85 @@ fn point(x: &[Transform], p: (usize, Option<DVec3>)) -> DVec3 {
     }
 }
 
+/// The sole points of `motion`'s skeleton: the foot points whose rest height
+/// is within `th.sole_band_m` of the lowest one (see the module doc), each a
+/// joint and, for its end site, the site's offset.
+fn sole_points(motion: &Motion, th: &Thresholds) -> Vec<(usize, Option<DVec3>)> {
+    let s = motion.skeleton();
+    let n_j = s.len();
+    let mut rest_x = vec![Transform::IDENTITY; n_j];
+    s.forward(DVec3::ZERO, &vec![glam::DQuat::IDENTITY; n_j], &mut rest_x);
+    let all_feet = foot_points(motion);
+    let rest_lo = all_feet
+        .iter()
+        .map(|p| point(&rest_x, *p).y)
+        .fold(f64::INFINITY, f64::min);
+    all_feet
+        .into_iter()
+        .filter(|p| point(&rest_x, *p).y <= rest_lo + th.sole_band_m)
+        .collect()
+}
+
+/// For each step `t -> t+1` and sole point `i` (index `t * nf + i`), the
+/// horizontal speed (m/s) when the point is in contact over the step, `None`
+/// when it is not; `foot_pos` holds `nf` positions per frame.
+fn contact_steps(foot_pos: &[DVec3], nf: usize, dt: f64, th: &Thresholds) -> Vec<Option<f64>> {
+    if nf == 0 {
+        return Vec::new();
+    }
+    let n_t = foot_pos.len() / nf;
+    let planted: Vec<f64> = (0..nf)
+        .map(|i| {
+            let mut ys: Vec<f64> = (0..n_t).map(|t| foot_pos[t * nf + i].y).collect();
+            ys.sort_by(f64::total_cmp);
+            ys[(ys.len() - 1) / 20]
+        })
+        .collect();
+    let in_contact = |t: usize, i: usize| {
+        let y = foot_pos[t * nf + i].y;
+        y < th.contact_height_m && y < planted[i] + th.contact_band_m
+    };
+    let mut out = Vec::with_capacity(n_t.saturating_sub(1) * nf);
+    for t in 0..n_t.saturating_sub(1) {
+        for i in 0..nf {
+            let (a, b) = (foot_pos[t * nf + i], foot_pos[(t + 1) * nf + i]);
+            let v = (b - a) / dt;
+            let contact = in_contact(t, i)
+                && in_contact(t + 1, i)
+                && v.y.abs() < th.contact_vertical_speed_m_s;
+            out.push(contact.then(|| DVec3::new(v.x, 0.0, v.z).length()));
+        }
+    }
+    out
+}
+
+/// Where and when the soles touch the ground, by the same rule as the foot
+/// skating metric: for each sole point, per step `t -> t+1`, its horizontal
+/// speed while in contact. What a viewer highlights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FootContacts {
+    /// The sole points: a joint, and whether the point is its end site.
+    pub points: Vec<(usize, bool)>,
+    /// `steps[t * points.len() + i]`: speed of point `i` over step `t -> t+1`
+    /// when in contact (m/s), `None` otherwise; `frames - 1` steps.
+    pub steps: Vec<Option<f64>>,
+}
+
+/// [`FootContacts`] of `motion` with thresholds `th`.
+pub fn foot_contacts(motion: &Motion, th: &Thresholds) -> FootContacts {
+    let feet = sole_points(motion, th);
+    let mut x = vec![Transform::IDENTITY; motion.joints()];
+    let mut foot_pos = Vec::with_capacity(motion.frames() * feet.len());
+    for t in 0..motion.frames() {
+        motion.world_transforms_into(t, &mut x);
+        foot_pos.extend(feet.iter().map(|p| point(&x, *p)));
+    }
+    FootContacts {
+        points: feet.iter().map(|p| (p.0, p.1.is_some())).collect(),
+        steps: contact_steps(&foot_pos, feet.len(), 1.0 / motion.fps(), th),
+    }
+}
+
 /// Metrics with the default thresholds.
 pub fn plausibility(motion: &Motion) -> Plausibility {
     plausibility_with(motion, &Thresholds::default())
@@ -132,18 +211,7 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
     let dt = 1.0 / motion.fps();
     let mut x = vec![Transform::IDENTITY; n_j];
 
-    // Sole points: foot points whose rest height is near the lowest one.
-    let mut rest_x = vec![Transform::IDENTITY; n_j];
-    s.forward(DVec3::ZERO, &vec![glam::DQuat::IDENTITY; n_j], &mut rest_x);
-    let all_feet = foot_points(motion);
-    let rest_lo = all_feet
-        .iter()
-        .map(|p| point(&rest_x, *p).y)
-        .fold(f64::INFINITY, f64::min);
-    let feet: Vec<(usize, Option<DVec3>)> = all_feet
-        .into_iter()
-        .filter(|p| point(&rest_x, *p).y <= rest_lo + th.sole_band_m)
-        .collect();
+    let feet = sole_points(motion, th);
 
     let lengths = s.bone_lengths();
     let mut positions = Vec::with_capacity(n_t * n_j);
@@ -173,29 +241,11 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
 
     // Foot skating.
     let nf = feet.len();
-    let planted: Vec<f64> = (0..nf)
-        .map(|i| {
-            let mut ys: Vec<f64> = (0..n_t).map(|t| foot_pos[t * nf + i].y).collect();
-            ys.sort_by(f64::total_cmp);
-            ys[(ys.len() - 1) / 20]
-        })
-        .collect();
-    let in_contact = |t: usize, i: usize| {
-        let y = foot_pos[t * nf + i].y;
-        y < th.contact_height_m && y < planted[i] + th.contact_band_m
-    };
-    let (mut speed_sum, mut contacts, mut steps) = (0.0, 0usize, 0usize);
-    for t in 0..n_t.saturating_sub(1) {
-        for i in 0..nf {
-            steps += 1;
-            let (a, b) = (foot_pos[t * nf + i], foot_pos[(t + 1) * nf + i]);
-            let v = (b - a) / dt;
-            if in_contact(t, i) && in_contact(t + 1, i) && v.y.abs() < th.contact_vertical_speed_m_s
-            {
-                contacts += 1;
-                speed_sum += DVec3::new(v.x, 0.0, v.z).length();
-            }
-        }
+    let steps = n_t.saturating_sub(1) * nf;
+    let (mut speed_sum, mut contacts) = (0.0, 0usize);
+    for speed in contact_steps(&foot_pos, nf, dt, th).into_iter().flatten() {
+        contacts += 1;
+        speed_sum += speed;
     }
 
     // Jerk.
@@ -311,6 +361,24 @@ mod tests {
         assert!(still.foot_skating_m_s.abs() < 1e-12);
         assert!(still.penetration_max_m < 1e-12 && still.floating_fraction == 0.0);
         assert!(still.jerk_m_s3 < 1e-9 && still.bone_length_drift < 1e-12);
+    }
+
+    #[test]
+    fn foot_contacts_are_the_skating_metrics_steps() {
+        let th = Thresholds::default();
+        let sliding = foot_contacts(&standing(40, 0.5, 0.0), &th);
+        // LeftToe and RightToe with their end sites.
+        assert_eq!(
+            sliding.points,
+            [(4, false), (4, true), (8, false), (8, true)]
+        );
+        assert_eq!(sliding.steps.len(), 39 * 4);
+        for step in &sliding.steps {
+            let speed = step.expect("planted all along");
+            assert!((speed - 0.5).abs() < 1e-9, "{speed}");
+        }
+        let floating = foot_contacts(&standing(20, 0.3, 0.2), &th);
+        assert!(floating.steps.iter().all(Option::is_none));
     }
 
     #[test]

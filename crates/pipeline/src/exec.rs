@@ -432,6 +432,13 @@ fn correction(
             Some(correct::class::checkpoints_of(&dir))
         }
     };
+    // The clip as it was before correction, beside the corrected one (the
+    // viewer plays them side by side).
+    std::fs::create_dir_all(ctx.dir).map_err(|source| PipelineError::Io {
+        path: ctx.dir.to_path_buf(),
+        source,
+    })?;
+    motion::io::save(motion, ctx.dir.join("input.bvh"))?;
     let outcome = stages::correct_with_config(
         config,
         name,

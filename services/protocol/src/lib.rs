@@ -243,6 +243,15 @@ pub mod artifacts {
     pub fn correction_report(clip: &str) -> String {
         format!("work/correct/{clip}/report.json")
     }
+    /// A source clip's learning curve so far, while its correction trains
+    /// (JSON `[[wall_s, samples, r_norm], ...]`; the viewer draws it live).
+    pub fn original_curve(clip: &str) -> String {
+        format!("work/originals/{clip}/curve.json")
+    }
+    /// A new clip's learning curve so far, while its correction trains.
+    pub fn correction_curve(clip: &str) -> String {
+        format!("work/correct/{clip}/curve.json")
+    }
     /// The debiasing network, zipped.
     pub const DEBIAS_MODEL: &str = "work/debias/model.zip";
     /// A class tracker's latest checkpoint, zipped (every correction of the

@@ -20,8 +20,8 @@
 //! coordinator from there through the runtime's handle.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use motion::Motion;
@@ -35,6 +35,9 @@ use crate::archive::{latest_checkpoint_zip, unzip_into, zip_dir};
 use crate::client::with_retries;
 use crate::runner::{JobContext, JobFailure, Outcome, Stop};
 use crate::transfer::{fetch, proceed, test_pause, upload};
+
+/// A correction's learning curve so far: [wall_s, samples, r_norm] per rollout.
+type Curve = Arc<Mutex<Vec<[f64; 3]>>>;
 
 /// Runs the claimed job `ctx.job` to its end, or until it must stop.
 pub async fn run(ctx: Arc<JobContext>) -> Result<Outcome, JobFailure> {
@@ -97,6 +100,14 @@ async fn run_in(
     let resumed = resume(ctx, &job, &run_dir).await?;
     let correction_dir = is_correction(&job).then(|| run_dir.clone());
     let stop = Arc::new(AtomicBool::new(false));
+    // The learning curve so far, uploaded while the correction trains.
+    let curve: Curve = Arc::new(Mutex::new(Vec::new()));
+    let live_curve = match &job.kind {
+        JobKind::Correct { clip, .. } => Some(artifacts::correction_curve(clip)),
+        JobKind::CorrectOriginal { clip, .. } => Some(artifacts::original_curve(clip)),
+        _ => None,
+    }
+    .map(|name| (name, curve.clone()));
     let task = {
         let (ctx, stop, dir, run_dir) = (ctx.clone(), stop.clone(), dir.to_path_buf(), run_dir);
         let handle = Handle::current();
@@ -112,6 +123,9 @@ async fn run_in(
             let on_progress = move |p: &correct::job::ProgressEvent| {
                 if p.budget_s > 0.0 {
                     control.set_progress((p.wall_s / p.budget_s).min(0.99));
+                }
+                if let (Some(r), Ok(mut points)) = (p.r_norm, curve.lock()) {
+                    points.push([p.wall_s, p.samples as f64, r]);
                 }
             };
             let context = pipeline::Context {
@@ -131,7 +145,7 @@ async fn run_in(
             Ok(uploader.output)
         })
     };
-    watch(ctx, task, &stop, correction_dir).await
+    watch(ctx, task, &stop, correction_dir, live_curve).await
 }
 
 /// What an earlier attempt left: a `synthesize` job's outputs so far, or a
@@ -176,9 +190,11 @@ async fn watch(
     mut task: tokio::task::JoinHandle<Result<JobOutput, PipelineError>>,
     stop: &AtomicBool,
     correction_dir: Option<PathBuf>,
+    live_curve: Option<(String, Curve)>,
 ) -> Result<JobOutput, PipelineError> {
     let checkpoints = correction_dir.map(|d| d.join("checkpoints"));
     let mut uploaded: Option<PathBuf> = None;
+    let mut curve_points = 0;
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     loop {
         tokio::select! {
@@ -191,6 +207,9 @@ async fn watch(
             // Cancelled, lease lost or shutting down: a correction ends its
             // current iteration (saving a checkpoint), other jobs their output.
             stop.store(true, Ordering::Relaxed);
+        }
+        if let Some((name, curve)) = &live_curve {
+            upload_curve(ctx, name, curve, &mut curve_points).await;
         }
         let Some(checkpoints) = &checkpoints else {
             // Other jobs stop after their current output (or run to the end).
@@ -221,6 +240,27 @@ async fn watch(
                 tracing::info!(progress = ctx.control.progress(), "checkpoint uploaded");
             }
         }
+    }
+}
+
+/// Uploads the learning curve when it has new points (for the viewer; a
+/// failed upload is only logged: the curve is a view, not a result).
+async fn upload_curve(
+    ctx: &JobContext,
+    name: &str,
+    curve: &Mutex<Vec<[f64; 3]>>,
+    sent: &mut usize,
+) {
+    let body = match curve.lock() {
+        Ok(points) if points.len() > *sent => {
+            *sent = points.len();
+            serde_json::to_vec(&*points).unwrap_or_default()
+        }
+        _ => return,
+    };
+    let path = job_path(ctx, &format!("artifacts/{name}"));
+    if let Err(e) = upload(ctx, &path, body).await {
+        tracing::warn!(error = %e.message, "learning curve upload failed");
     }
 }
 

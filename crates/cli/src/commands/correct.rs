@@ -103,6 +103,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     config.ppo.threads = args.threads;
     let terminal = std::io::stderr().is_terminal();
+    // The input beside the output, for `motionaug view DIR` to play both.
+    std::fs::create_dir_all(&args.out)?;
+    motion::io::save(&motion, args.out.join("input.bvh"))?;
     let outcome = correct::correct(
         &motion,
         &clip_name(&args.input),

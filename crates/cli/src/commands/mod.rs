@@ -10,3 +10,4 @@ pub mod inspect;
 pub mod interaction;
 pub mod metrics;
 pub mod vae;
+pub mod view;

@@ -17,6 +17,7 @@ pub mod augmentations;
 pub mod datasets;
 pub mod docs;
 pub mod health;
+pub mod viewer;
 pub mod worker;
 
 /// JSON bodies other than uploads and artifacts (recipes, worker reports).
@@ -36,6 +37,16 @@ pub fn router(limits: &Limits) -> OpenApiRouter<AppState> {
         .routes(routes!(augmentations::get, augmentations::cancel))
         .routes(routes!(augmentations::events))
         .routes(routes!(augmentations::results))
+        // The viewer page and what it reads (tenant API key for /v1).
+        .routes(routes!(viewer::dataset_library))
+        .routes(routes!(viewer::dataset_clip_view))
+        .routes(routes!(viewer::augmentation_library))
+        .routes(routes!(viewer::augmentation_clip_view))
+        .routes(routes!(viewer::augmentation_file))
+        .routes(routes!(viewer::page))
+        .routes(routes!(viewer::redirect))
+        .routes(routes!(viewer::info))
+        .routes(routes!(viewer::asset))
         // Internal worker API (worker token).
         .routes(routes!(worker::claim))
         .routes(routes!(worker::heartbeat))

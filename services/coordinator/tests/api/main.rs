@@ -15,3 +15,4 @@ mod helpers;
 mod jobs;
 mod load;
 mod openapi;
+mod viewer;
