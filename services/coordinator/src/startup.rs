@@ -19,7 +19,7 @@ use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
 use crate::openapi::{self, OpenApiJson};
 use crate::state::JobState;
-use crate::{queue, routes};
+use crate::{error, queue, routes};
 
 /// Shared state of the request handlers.
 #[derive(Clone)]
@@ -113,6 +113,7 @@ pub fn router(state: AppState) -> Router {
     let document = OpenApiJson::new(&openapi::finish(api));
     routes
         .layer(Extension(document))
+        .layer(middleware::from_fn(error::problem_for_every_error))
         .layer(middleware::from_fn_with_state(
             state.clone(),
             track_requests,

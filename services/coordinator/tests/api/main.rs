@@ -10,6 +10,7 @@
 
 mod augmentations;
 mod datasets;
+mod errors;
 mod health;
 mod helpers;
 mod jobs;
