@@ -48,6 +48,62 @@ enum Kind {
     Zip,
 }
 
+/// What a clip's name may be: it names the result files (`<clip>__00_noise_000.bvh`,
+/// `work/correct/<clip>/report.json`), so it is one safe path segment.
+pub const CLIP_NAME_RULE: &str = "a clip's name (the file name without its extension) may hold \
+     letters, digits, `.`, `_` and `-`, must not start with `.` and has at most 100 characters";
+
+/// Longest clip name.
+const MAX_CLIP_NAME: usize = 100;
+
+/// Whether `name` is a clip name by [`CLIP_NAME_RULE`].
+pub fn is_clip_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= MAX_CLIP_NAME
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+}
+
+/// A multipart file name is a bare file name: no folders (`/`, `\`), no `.`
+/// or `..`, no control characters. Such names are refused, never cut down.
+pub fn check_part_name(name: &str) -> Result<(), ApiError> {
+    let bad = name.is_empty()
+        || name.contains(['/', '\\'])
+        || name == "."
+        || name == ".."
+        || name.chars().any(char::is_control)
+        || name.len() > 255;
+    if bad {
+        return Err(ApiError::unprocessable(format!(
+            "file name `{name}` is not a bare file name; send files without folders (no `/` or \
+             `\\`, not `.` or `..`), e.g. `walk.bvh`"
+        ))
+        .with_file(name)
+        .with_field("file"));
+    }
+    Ok(())
+}
+
+/// A zip entry's path stays inside the zip: relative, `/`-separated, no `..`.
+fn check_entry_path(zip_label: &str, path: &str) -> Result<(), ApiError> {
+    let segments: Vec<&str> = path.split('/').collect();
+    let bad = path.starts_with('/')
+        || path.contains('\\')
+        || path.chars().any(char::is_control)
+        || segments.iter().any(|s| *s == ".." || s.contains(':'));
+    if bad {
+        let label = format!("{zip_label}/{path}");
+        return Err(ApiError::unprocessable(format!(
+            "{zip_label}: entry `{path}` points outside the zip (absolute, `..` or `\\` in its \
+             path); zip the files with relative paths"
+        ))
+        .with_file(label));
+    }
+    Ok(())
+}
+
 fn base_name(path: &str) -> &str {
     path.rsplit(['/', '\\']).next().unwrap_or(path)
 }
@@ -113,6 +169,7 @@ pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Upload
                 continue;
             }
             let path = entry.name().map_err(bad_zip)?.to_string();
+            check_entry_path(&file.label, &path)?;
             if is_ignorable_entry(&path) {
                 continue;
             }
@@ -237,6 +294,13 @@ pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Parse
             .with_file(&file.label));
         }
         let name = stem(&file.name).to_string();
+        if !is_clip_name(&name) {
+            return Err(ApiError::unprocessable(format!(
+                "{}: `{name}` cannot be a clip name: {CLIP_NAME_RULE}; rename the file",
+                file.label
+            ))
+            .with_file(&file.label));
+        }
         if let Some(other) = clips.iter().find(|c| c.name == name) {
             return Err(ApiError::unprocessable(format!(
                 "{}: a clip named `{name}` was already uploaded as {}; clip names must be unique",
@@ -302,5 +366,46 @@ mod tests {
         };
         assert_eq!(kind_of(&f("A.BVH")).unwrap(), Kind::Bvh);
         assert!(kind_of(&f("notes.txt")).is_err());
+    }
+
+    #[test]
+    fn unsafe_names_are_refused() {
+        for name in ["walk", "HDM_bd_kick-1.v2", "a"] {
+            assert!(is_clip_name(name), "{name}");
+        }
+        for name in [
+            "",
+            ".",
+            "..",
+            ".hidden",
+            "my walk",
+            "a/b",
+            "a\\b",
+            "é",
+            &"x".repeat(101),
+        ] {
+            assert!(!is_clip_name(name), "{name}");
+        }
+        assert!(check_part_name("walk.bvh").is_ok());
+        for name in [
+            "../../etc/x.bvh",
+            "/etc/abs.bvh",
+            "..\\..\\evil.bvh",
+            "..",
+            "a\nb.bvh",
+            "",
+        ] {
+            assert!(check_part_name(name).is_err(), "{name}");
+        }
+        assert!(check_entry_path("d.zip", "dir/walk.bvh").is_ok());
+        for path in [
+            "../../escape.bvh",
+            "/abs.bvh",
+            "a/../b.bvh",
+            "..\\x.bvh",
+            "C:/x.bvh",
+        ] {
+            assert!(check_entry_path("d.zip", path).is_err(), "{path}");
+        }
     }
 }

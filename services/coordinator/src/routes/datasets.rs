@@ -15,7 +15,7 @@ use crate::events::Event;
 use crate::openapi::DatasetUpload;
 use crate::queue;
 use crate::startup::AppState;
-use crate::upload::{UploadFile, parse_upload};
+use crate::upload::{UploadFile, check_part_name, parse_upload};
 
 /// A stored clip.
 #[derive(Debug, Serialize, sqlx::FromRow, ToSchema)]
@@ -73,12 +73,13 @@ async fn read_parts(
             Some("file") => {
                 let file_name = field
                     .file_name()
-                    .map(|n| n.rsplit(['/', '\\']).next().unwrap_or(n).to_string())
+                    .map(str::to_string)
                     .filter(|n| !n.is_empty())
                     .ok_or_else(|| {
                         ApiError::bad_request("every `file` part needs a filename")
                             .with_field("file")
                     })?;
+                check_part_name(&file_name)?;
                 let bytes = field.bytes().await.map_err(|e| {
                     from_rejection(e.status(), format!("{file_name}: {}", e.body_text()))
                 })?;
