@@ -9,6 +9,7 @@
 //! crate's end-to-end test.
 
 mod augmentations;
+mod cli;
 mod datasets;
 mod errors;
 mod health;
