@@ -23,7 +23,42 @@ pub struct Config {
     /// `MOTIONAUG_WORKER_TOKEN`: shared secret of the internal worker API.
     pub worker_token: String,
     pub limits: Limits,
+    pub quotas: Quotas,
     pub queue: QueueConfig,
+}
+
+/// What each tenant may use (documented in docs/SERVICE.md and shown at
+/// `GET /v1/limits`). The same for every tenant; checked and taken in the
+/// transaction that stores the new dataset or augmentation, under the
+/// tenant's row lock (see `crate::quota`).
+#[derive(Debug, Clone)]
+pub struct Quotas {
+    /// `MOTIONAUG_QUOTA_OUTPUTS_PER_AUGMENTATION`: new clips one augmentation may
+    /// make (default 20000); more is a 422.
+    pub outputs_per_augmentation: u64,
+    /// `MOTIONAUG_QUOTA_ACTIVE_AUGMENTATIONS`: augmentations of a tenant that may be
+    /// unfinished at once (default 10); one more is a 429.
+    pub active_augmentations: u64,
+    /// `MOTIONAUG_QUOTA_CORRECTION_SECONDS`: correction budget (`[correct]
+    /// time_budget_s` x correction jobs) of a tenant's unfinished augmentations
+    /// together (default 1000000); more is a 429 (a 422 for one augmentation
+    /// that alone needs more).
+    pub correction_seconds: u64,
+    /// `MOTIONAUG_QUOTA_STORED_BYTES`: bytes a tenant may keep stored: uploaded
+    /// files, results and checkpoints (default 10 GiB). An upload that would pass
+    /// it, or a new augmentation once it is reached, is a 429.
+    pub stored_bytes: u64,
+}
+
+impl Default for Quotas {
+    fn default() -> Self {
+        Quotas {
+            outputs_per_augmentation: 20_000,
+            active_augmentations: 10,
+            correction_seconds: 1_000_000,
+            stored_bytes: 10 << 30,
+        }
+    }
 }
 
 /// Request limits (documented in docs/SERVICE.md).
@@ -117,6 +152,7 @@ impl Config {
             bail!("MOTIONAUG_WORKER_TOKEN must be at least 16 characters long");
         }
         let dl = Limits::default();
+        let dquota = Quotas::default();
         let dq = QueueConfig::default();
         let max_attempts = number("MOTIONAUG_MAX_ATTEMPTS", dq.max_attempts as u64)?;
         if !(1..=100).contains(&max_attempts) {
@@ -166,6 +202,21 @@ impl Config {
                     "MOTIONAUG_MAX_ARTIFACT_BYTES",
                     dl.max_artifact_bytes as u64,
                 )? as usize,
+            },
+            quotas: Quotas {
+                outputs_per_augmentation: number(
+                    "MOTIONAUG_QUOTA_OUTPUTS_PER_AUGMENTATION",
+                    dquota.outputs_per_augmentation,
+                )?,
+                active_augmentations: number(
+                    "MOTIONAUG_QUOTA_ACTIVE_AUGMENTATIONS",
+                    dquota.active_augmentations,
+                )?,
+                correction_seconds: number(
+                    "MOTIONAUG_QUOTA_CORRECTION_SECONDS",
+                    dquota.correction_seconds,
+                )?,
+                stored_bytes: number("MOTIONAUG_QUOTA_STORED_BYTES", dquota.stored_bytes)?,
             },
             queue,
         })

@@ -35,6 +35,15 @@ pub struct Problem {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(nullable = false)]
     pub field: Option<String>,
+    /// The quota that was reached, as `GET /v1/limits` names it (e.g.
+    /// `active_augmentations`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
+    pub limit: Option<&'static str>,
+    /// That quota's value.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
+    pub max: Option<u64>,
 }
 
 /// The `Problem` response of the OpenAPI document, which every error answer uses.
@@ -65,6 +74,8 @@ impl ApiError {
             file: None,
             line: None,
             field: None,
+            limit: None,
+            max: None,
         }))
     }
 
@@ -116,6 +127,13 @@ impl ApiError {
 
     pub fn with_field(mut self, field: impl Into<String>) -> Self {
         self.0.field = Some(field.into());
+        self
+    }
+
+    /// Names the quota that was reached and its value.
+    pub fn with_limit(mut self, limit: &'static str, max: u64) -> Self {
+        self.0.limit = Some(limit);
+        self.0.max = Some(max);
         self
     }
 
@@ -204,6 +222,8 @@ pub async fn problem_for_every_error(request: Request, next: Next) -> Response {
         file: None,
         line: None,
         field: None,
+        limit: None,
+        max: None,
     };
     let body = if method == Method::HEAD {
         Vec::new()

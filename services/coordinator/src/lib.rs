@@ -13,6 +13,7 @@ pub mod events;
 pub mod metrics;
 pub mod openapi;
 pub mod queue;
+pub mod quota;
 pub mod routes;
 pub mod startup;
 pub mod state;

@@ -18,8 +18,8 @@ use crate::error::Problem;
 
 const DESCRIPTION: &str = "Upload motion-capture datasets, augment them with a recipe, \
 follow progress and download the results. All /v1 routes need `Authorization: Bearer <api key>`; \
-errors are application/problem+json. Limits (defaults, configurable): upload body 256 MiB, \
-1000 files per upload (zip entries count), 200000 frames per clip, 1 GiB unpacked zip content.";
+errors are application/problem+json. Every limit, recipe bound and tenant quota in force, \
+with the tenant's use, is at GET /v1/limits; a refused quota is named in the problem's `limit`.";
 
 #[derive(OpenApi)]
 #[openapi(

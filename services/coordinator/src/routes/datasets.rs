@@ -13,9 +13,9 @@ use crate::auth::Tenant;
 use crate::error::{ApiError, Problem, from_rejection};
 use crate::events::Event;
 use crate::openapi::DatasetUpload;
-use crate::queue;
 use crate::startup::AppState;
 use crate::upload::{UploadFile, check_part_name, parse_upload};
+use crate::{queue, quota};
 
 /// A stored clip.
 #[derive(Debug, Serialize, sqlx::FromRow, ToSchema)]
@@ -143,6 +143,7 @@ async fn read_parts(
         (status = 401, response = Problem),
         (status = 413, response = Problem),
         (status = 422, response = Problem),
+        (status = 429, response = Problem),
     )
 )]
 pub async fn create(
@@ -159,7 +160,14 @@ pub async fn create(
         .map_err(|e| ApiError::internal(format!("parsing the upload failed: {e}")))??;
     let dataset_id = Uuid::new_v4();
     let name = name.unwrap_or(default_name);
+    let bytes: usize = clips
+        .iter()
+        .map(|c| c.source.len() + c.skeleton.as_ref().map_or(0, Vec::len))
+        .sum();
     let mut tx = state.db.begin().await?;
+    quota::lock_tenant(&mut tx, tenant.id).await?;
+    let usage = quota::usage(&mut *tx, tenant.id).await?;
+    quota::check_stored(&state.config.quotas, &usage, bytes.max(1) as u64)?;
     sqlx::query("INSERT INTO datasets (id, tenant_id, name) VALUES ($1, $2, $3)")
         .bind(dataset_id)
         .bind(tenant.id)

@@ -17,6 +17,7 @@ pub mod augmentations;
 pub mod datasets;
 pub mod docs;
 pub mod health;
+pub mod limits;
 pub mod worker;
 
 /// JSON bodies other than uploads and artifacts (recipes, worker reports).
@@ -36,6 +37,7 @@ pub fn router(limits: &Limits) -> OpenApiRouter<AppState> {
         .routes(routes!(augmentations::get, augmentations::cancel))
         .routes(routes!(augmentations::events))
         .routes(routes!(augmentations::results))
+        .routes(routes!(limits::get))
         // Internal worker API (worker token).
         .routes(routes!(worker::claim))
         .routes(routes!(worker::heartbeat))

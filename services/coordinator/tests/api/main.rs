@@ -15,5 +15,6 @@ mod errors;
 mod health;
 mod helpers;
 mod jobs;
+mod limits;
 mod load;
 mod openapi;
