@@ -19,6 +19,7 @@ use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
 use crate::openapi::{self, OpenApiJson};
 use crate::state::JobState;
+use crate::upload_memory::UploadMemory;
 use crate::{error, queue, routes};
 
 /// Shared state of the request handlers.
@@ -28,6 +29,8 @@ pub struct AppState {
     pub config: Arc<Config>,
     pub events: Events,
     pub metrics: Arc<Metrics>,
+    /// Upload slots and the memory budget of uploads.
+    pub uploads: UploadMemory,
 }
 
 /// Connects to Postgres, waiting up to a minute for it to come up (containers
@@ -69,9 +72,14 @@ impl Application {
         let listener = TcpListener::bind(&config.listen)
             .await
             .with_context(|| format!("cannot listen on {} (MOTIONAUG_LISTEN)", config.listen))?;
+        let uploads = UploadMemory::new(
+            config.limits.max_concurrent_uploads,
+            config.limits.upload_memory_bytes,
+        );
         Ok(Application {
             listener,
             state: AppState {
+                uploads,
                 db,
                 config: Arc::new(config),
                 events,

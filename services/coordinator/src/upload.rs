@@ -14,6 +14,7 @@ use motionaug_protocol::clip::{self, LoadedSkeleton};
 
 use crate::configuration::Limits;
 use crate::error::ApiError;
+use crate::upload_memory::{self, Reservation};
 
 /// One uploaded file (or zip entry).
 #[derive(Debug, Clone)]
@@ -139,8 +140,15 @@ fn is_ignorable_entry(path: &str) -> bool {
         || base.eq_ignore_ascii_case("readme.txt")
 }
 
-/// Replaces every zip by its entries, enforcing the file-count and unpacked-size limits.
-pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<UploadFile>, ApiError> {
+/// Replaces every zip by its entries, enforcing the file-count and unpacked-size
+/// limits while inflating: each entry is read in 64 KiB steps into memory
+/// reserved from the upload budget, and refused as soon as the upload's
+/// unpacked bytes pass the limit (a zip bomb costs at most the limit).
+pub fn expand_zips(
+    files: Vec<UploadFile>,
+    limits: &Limits,
+    reservation: &mut Reservation,
+) -> Result<Vec<UploadFile>, ApiError> {
     let mut out = Vec::new();
     let mut unpacked: u64 = 0;
     let too_many = || {
@@ -174,23 +182,37 @@ pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Upload
                 continue;
             }
             let label = format!("{}/{}", file.label, path);
+            let too_large = || {
+                ApiError::too_large(format!(
+                    "{label}: the upload unpacks to more than {} bytes",
+                    limits.max_unzipped_bytes
+                ))
+                .with_file(&label)
+            };
             let remaining = limits.max_unzipped_bytes.saturating_sub(unpacked);
+            if entry.size() > remaining {
+                // The declared size already passes the limit.
+                return Err(too_large());
+            }
+            // Never more than the limit (plus the byte that shows it was passed).
+            let cap = usize::try_from(remaining.saturating_add(1)).unwrap_or(usize::MAX);
             let mut bytes = Vec::new();
-            (&mut entry)
-                .take(remaining + 1)
-                .read_to_end(&mut bytes)
-                .map_err(|e| {
+            let mut step = vec![0u8; 64 << 10];
+            loop {
+                let n = entry.read(&mut step).map_err(|e| {
                     ApiError::unprocessable(format!("{label}: cannot unpack: {e}"))
                         .with_file(&label)
                 })?;
-            unpacked += bytes.len() as u64;
-            if unpacked > limits.max_unzipped_bytes {
-                return Err(ApiError::too_large(format!(
-                    "{label}: the zip unpacks to more than {} bytes",
-                    limits.max_unzipped_bytes
-                ))
-                .with_file(&label));
+                if n == 0 {
+                    break;
+                }
+                if (bytes.len() + n) as u64 > remaining {
+                    return Err(too_large());
+                }
+                upload_memory::append(&mut bytes, &step[..n], cap, reservation)
+                    .map_err(|e| e.with_file(&label))?;
             }
+            unpacked += bytes.len() as u64;
             let entry_file = UploadFile {
                 name: base_name(&path).to_string(),
                 label,
@@ -251,9 +273,14 @@ fn pick_skeleton<'a>(
     })
 }
 
-/// Parses every file; the first problem rejects the upload.
-pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<ParsedClip>, ApiError> {
-    let files = expand_zips(files, limits)?;
+/// Parses every file; the first problem rejects the upload. Zips are unpacked
+/// into memory reserved from `reservation`.
+pub fn parse_upload(
+    files: Vec<UploadFile>,
+    limits: &Limits,
+    reservation: &mut Reservation,
+) -> Result<Vec<ParsedClip>, ApiError> {
+    let files = expand_zips(files, limits, reservation)?;
     let mut skeletons = Vec::new();
     let mut motions = Vec::new();
     for file in files {

@@ -37,6 +37,10 @@ pub struct RequestLimits {
     pub max_unzipped_bytes: u64,
     pub max_json_body_bytes: u64,
     pub max_artifact_bytes: u64,
+    /// Uploads read and checked at once (others wait).
+    pub max_concurrent_uploads: u64,
+    /// Memory all uploads of one coordinator may hold together.
+    pub upload_memory_bytes: u64,
 }
 
 /// The upper bound of one numeric recipe field.
@@ -126,6 +130,8 @@ pub async fn get(
             max_unzipped_bytes: l.max_unzipped_bytes,
             max_json_body_bytes: JSON_BODY_LIMIT as u64,
             max_artifact_bytes: l.max_artifact_bytes as u64,
+            max_concurrent_uploads: l.max_concurrent_uploads as u64,
+            upload_memory_bytes: l.upload_memory_bytes,
         },
         recipe: RecipeLimits {
             max_ops: pipeline::recipe::bounds::MAX_OPS as u64,

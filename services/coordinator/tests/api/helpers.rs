@@ -34,7 +34,7 @@ pub struct TestApp {
 }
 
 /// Drops the test database from a separate thread.
-fn drop_database(name: &str) {
+pub fn drop_database(name: &str) {
     let name = name.to_string();
     let _ = std::thread::spawn(move || {
         let runtime = tokio::runtime::Builder::new_current_thread()
@@ -63,7 +63,8 @@ impl Drop for TestApp {
     }
 }
 
-pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
+/// A new empty database: its name and URL (drop it with [`drop_database`]).
+pub async fn create_database() -> (String, String) {
     let db_name = format!("test_{}", Uuid::new_v4().simple());
     let mut admin = PgConnection::connect(ADMIN_URL)
         .await
@@ -73,6 +74,11 @@ pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
         .await
         .unwrap();
     let database_url = format!("postgres://postgres@127.0.0.1:5432/{db_name}");
+    (db_name, database_url)
+}
+
+pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
+    let (db_name, database_url) = create_database().await;
     let mut env: HashMap<String, String> = [
         ("DATABASE_URL", database_url.as_str()),
         ("REDIS_URL", "redis://127.0.0.1:6379/0"),

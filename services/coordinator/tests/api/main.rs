@@ -17,4 +17,5 @@ mod helpers;
 mod jobs;
 mod limits;
 mod load;
+mod memory;
 mod openapi;
