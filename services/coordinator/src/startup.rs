@@ -14,6 +14,7 @@ use sqlx::postgres::PgPoolOptions;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 
+use crate::auth::KeyCache;
 use crate::configuration::Config;
 use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
@@ -31,6 +32,8 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// Upload slots and the memory budget of uploads.
     pub uploads: UploadMemory,
+    /// API keys looked up recently.
+    pub keys: KeyCache,
 }
 
 /// Connects to Postgres, waiting up to a minute for it to come up (containers
@@ -80,6 +83,7 @@ impl Application {
             listener,
             state: AppState {
                 uploads,
+                keys: KeyCache::default(),
                 db,
                 config: Arc::new(config),
                 events,

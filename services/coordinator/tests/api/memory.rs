@@ -1,7 +1,5 @@
 //! The peak memory of a real coordinator process while it refuses zip bombs.
 
-use std::process::{Child, Command, Stdio};
-
 use crate::helpers::*;
 
 /// A zip of entries `bomb<k>.bvh`, one per size, each holding that many zero
@@ -63,15 +61,6 @@ fn memory_mb(pid: u32) -> (f64, f64) {
     (field("VmHWM:"), field("VmRSS:"))
 }
 
-struct Coordinator(Child);
-
-impl Drop for Coordinator {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 const MB: usize = 1 << 20;
 
 /// Ten uploads at once against a real coordinator process started with `env`
@@ -82,42 +71,13 @@ const MB: usize = 1 << 20;
 /// second passes the limit while it is inflated). Returns the process's peak
 /// resident memory in MB; prints the figures.
 async fn bombard(env: &[(&str, &str)]) -> f64 {
-    let binary = env!("CARGO_BIN_EXE_motionaug-coordinator");
-    let (db_name, database_url) = create_database().await;
-    let key = Command::new(binary)
-        .args(["create-key", "--tenant", "bombs"])
-        .env("DATABASE_URL", &database_url)
-        .output()
-        .unwrap();
-    assert!(key.status.success(), "{key:?}");
-    let key = String::from_utf8(key.stdout).unwrap().trim().to_string();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let server = Coordinator(
-        Command::new(binary)
-            .env("DATABASE_URL", &database_url)
-            .env("MOTIONAUG_LISTEN", format!("127.0.0.1:{port}"))
-            .env("MOTIONAUG_WORKER_TOKEN", WORKER_TOKEN)
-            .env("RUST_LOG", "warn")
-            .envs(env.iter().copied())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap(),
+    let server = RealCoordinator::start(env).await;
+    let (pid, base, key, http) = (
+        server.pid(),
+        server.base.clone(),
+        server.key.clone(),
+        reqwest::Client::new(),
     );
-    let pid = server.0.id();
-    let base = format!("http://127.0.0.1:{port}");
-    let http = reqwest::Client::new();
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
-    while http.get(format!("{base}/healthz")).send().await.is_err() {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "coordinator did not start"
-        );
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
     let (_, idle) = memory_mb(pid);
 
     let bombs = tokio::task::spawn_blocking(|| {
@@ -178,8 +138,7 @@ async fn bombard(env: &[(&str, &str)]) -> f64 {
         .await
         .unwrap();
     assert_eq!(r.status(), StatusCode::CREATED);
-    drop(server);
-    drop_database(&db_name);
+    server.stop();
     peak
 }
 
