@@ -235,6 +235,87 @@ pub fn plan(recipe: &Recipe, names: &[String], seed: u64) -> Plan {
     Plan::finished(graph.jobs)
 }
 
+/// The groups of clips that get a VAE: those with at least `min_clips` clips.
+fn vae_groups(v: &VaeStep, names: &[String]) -> BTreeMap<String, Vec<String>> {
+    let mut groups: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for name in names {
+        let group = match v.group_by {
+            GroupBy::Class => class_of(name),
+            GroupBy::All => "all".to_string(),
+        };
+        groups.entry(group).or_default().push(name.clone());
+    }
+    groups.retain(|_, clips| clips.len() >= v.min_clips);
+    groups
+}
+
+/// How big [`plan`]'s graph would be, counted without making it (a recipe of
+/// 64 ops x 1000 copies over many clips plans millions of jobs): what a
+/// service checks against its quotas before planning.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PlanSize {
+    /// New clips the plan makes (kinematic, VAE and interaction outputs).
+    pub outputs: u64,
+    /// Correction jobs (`correct_original` and `correct`), each training up to
+    /// `[correct] time_budget_s`.
+    pub corrections: u64,
+    /// Class tracker jobs (`policy = "class"`), each training up to
+    /// `[correct] tracker_budget_s`.
+    pub trackers: u64,
+    /// Every job of the graph.
+    pub jobs: u64,
+}
+
+/// The size of `plan(recipe, names, _)` (any seed), in time linear in the
+/// number of clips.
+pub fn size(recipe: &Recipe, names: &[String]) -> PlanSize {
+    let clips = names.len() as u64;
+    let mut size = PlanSize::default();
+    let mut correctable = 0u64;
+    if let Some(s) = &recipe.synth {
+        let made = clips.saturating_mul(s.outputs_per_clip() as u64);
+        size.jobs += clips;
+        size.outputs = size.outputs.saturating_add(made);
+        correctable = correctable.saturating_add(made);
+    }
+    if let Some(v) = &recipe.vae {
+        let groups = vae_groups(v, names).len() as u64;
+        let made = groups.saturating_mul(v.copies as u64);
+        size.jobs += groups;
+        size.outputs = size.outputs.saturating_add(made);
+        correctable = correctable.saturating_add(made);
+    }
+    if let Some(i) = &recipe.interaction {
+        let pairs = pairs(names).len() as u64;
+        size.jobs += pairs;
+        size.outputs = size
+            .outputs
+            .saturating_add(pairs.saturating_mul(2 * i.copies as u64));
+    }
+    if let Some(c) = &recipe.correct {
+        let by_class = c.policy == PolicyKind::Class;
+        let originals = if (c.warm_start && !by_class) || recipe.debias.is_some() {
+            clips
+        } else {
+            0
+        };
+        if by_class {
+            let classes: std::collections::BTreeSet<String> =
+                names.iter().map(|n| class_of(n)).collect();
+            size.trackers = classes.len() as u64;
+        }
+        size.corrections = originals.saturating_add(correctable);
+        size.jobs = size
+            .jobs
+            .saturating_add(size.corrections)
+            .saturating_add(size.trackers);
+        if recipe.debias.is_some() && clips > 0 {
+            size.jobs = size.jobs.saturating_add(1).saturating_add(correctable);
+        }
+    }
+    size
+}
+
 /// The plan under construction: its jobs so far, and the new clips they make
 /// (what the correction jobs are planned over).
 #[derive(Default)]
@@ -296,18 +377,7 @@ impl Graph {
 
     /// One `vae` job per group of at least `min_clips` clips.
     fn vae(&mut self, v: &VaeStep, names: &[String], seed: u64, op_index: usize) {
-        let mut groups: BTreeMap<String, Vec<String>> = BTreeMap::new();
-        for name in names {
-            let group = match v.group_by {
-                GroupBy::Class => class_of(name),
-                GroupBy::All => "all".to_string(),
-            };
-            groups.entry(group).or_default().push(name.clone());
-        }
-        for (group, clips) in groups {
-            if clips.len() < v.min_clips {
-                continue;
-            }
+        for (group, clips) in vae_groups(v, names) {
             let key = format!("vae:{group}");
             let outputs = vae_outputs(&group, v.copies);
             // Warm start from the best-corrected clip of the class: same

@@ -274,6 +274,116 @@ impl<'de> Deserialize<'de> for Recipe {
     }
 }
 
+/// The upper bound of one numeric recipe field.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Bound {
+    /// The table, e.g. `correct`.
+    pub table: &'static str,
+    pub field: &'static str,
+    /// The largest value accepted.
+    pub max: f64,
+    /// What the value counts, for messages.
+    pub unit: &'static str,
+}
+
+impl Bound {
+    /// `value` if it is finite and at most the bound; else an error naming the
+    /// table, the field and the bound.
+    fn check(&self, value: f64) -> Result<(), PipelineError> {
+        if value.is_finite() && value <= self.max {
+            return Ok(());
+        }
+        Err(err(
+            format!("[{}]", self.table),
+            format!(
+                "`{}` = {value} is above its bound of {} {}",
+                self.field, self.max, self.unit
+            ),
+        ))
+    }
+}
+
+/// Upper bounds of the numeric fields that the tables' own crates leave
+/// open (the ops' parameters are bounded by the synth crate, the acceptance
+/// criteria by the correct crate, the interaction ranges by the interaction
+/// crate, copies by [`synth::recipe::MAX_COPIES`]). Each bounds a cost: a
+/// typo such as `time_budget_s = 1e308`, `envs = 1000000` or
+/// `iterations = 1e12` is refused, naming the field and its bound, instead of
+/// running for ever or exhausting a worker's memory. Generous on purpose: ten
+/// to a hundred times the defaults.
+pub mod bounds {
+    use super::Bound;
+
+    /// Largest number of `[[ops]]` tables (the synth crate's bound).
+    pub const MAX_OPS: usize = synth::recipe::MAX_OPS;
+    /// Largest `copies` of an op, of `[vae]` and of `[interaction]`.
+    pub const MAX_COPIES: u32 = synth::recipe::MAX_COPIES;
+
+    const fn bound(
+        table: &'static str,
+        field: &'static str,
+        max: f64,
+        unit: &'static str,
+    ) -> Bound {
+        Bound {
+            table,
+            field,
+            max,
+            unit,
+        }
+    }
+
+    pub const VAE_ITERATIONS: Bound = bound("vae", "iterations", 100_000.0, "training steps");
+    pub const VAE_MIN_CLIPS: Bound = bound("vae", "min_clips", 10_000.0, "clips");
+    pub const CORRECT_TIME_BUDGET_S: Bound = bound(
+        "correct",
+        "time_budget_s",
+        86_400.0,
+        "seconds per clip (24 h)",
+    );
+    pub const CORRECT_ENVS: Bound = bound("correct", "envs", 64.0, "simulated environments");
+    pub const CORRECT_TRACKER_BUDGET_S: Bound = bound(
+        "correct",
+        "tracker_budget_s",
+        7.0 * 86_400.0,
+        "seconds per class tracker (a week)",
+    );
+    pub const DEBIAS_ITERATIONS: Bound =
+        bound("debias", "iterations", 200_000.0, "optimiser steps");
+    pub const DEBIAS_BATCH_SIZE: Bound = bound("debias", "batch_size", 65_536.0, "frames");
+    pub const DEBIAS_LAYERS: Bound = bound("debias", "hidden", 8.0, "hidden layers");
+    pub const DEBIAS_WIDTH: Bound = bound("debias", "hidden[]", 4096.0, "units per layer");
+    pub const DEBIAS_LEARNING_RATE: Bound = bound("debias", "learning_rate", 1.0, "");
+    pub const DEBIAS_WEIGHT_DECAY: Bound = bound("debias", "weight_decay", 1.0, "");
+    pub const DEBIAS_HEIGHT_BAND_M: Bound =
+        bound("debias", "contacts.height_band_m", 1.0, "metres");
+    pub const DEBIAS_MAX_SPEED: Bound = bound(
+        "debias",
+        "contacts.max_speed_m_s",
+        10.0,
+        "metres per second",
+    );
+    pub const DEBIAS_BLEND_S: Bound = bound("debias", "contacts.blend_s", 10.0, "seconds");
+
+    /// Every bound above (for documentation and the service's limits endpoint).
+    pub const ALL: &[Bound] = &[
+        VAE_ITERATIONS,
+        VAE_MIN_CLIPS,
+        CORRECT_TIME_BUDGET_S,
+        CORRECT_ENVS,
+        CORRECT_TRACKER_BUDGET_S,
+        DEBIAS_ITERATIONS,
+        DEBIAS_BATCH_SIZE,
+        DEBIAS_LAYERS,
+        DEBIAS_WIDTH,
+        DEBIAS_LEARNING_RATE,
+        DEBIAS_WEIGHT_DECAY,
+        DEBIAS_HEIGHT_BAND_M,
+        DEBIAS_MAX_SPEED,
+        DEBIAS_BLEND_S,
+    ];
+}
+
 fn err(location: impl Into<String>, message: impl Into<String>) -> PipelineError {
     PipelineError::Recipe {
         location: location.into(),
@@ -400,9 +510,11 @@ impl Recipe {
             if v.iterations == 0 {
                 return Err(err("[vae]", "`iterations` must be at least 1"));
             }
+            bounds::VAE_ITERATIONS.check(v.iterations as f64)?;
             if v.min_clips == 0 {
                 return Err(err("[vae]", "`min_clips` must be at least 1"));
             }
+            bounds::VAE_MIN_CLIPS.check(v.min_clips as f64)?;
         }
         if let Some(i) = &self.interaction {
             if !(1..=synth::recipe::MAX_COPIES).contains(&i.copies) {
@@ -423,6 +535,8 @@ impl Recipe {
                     "`time_budget_s` must be a duration in seconds",
                 ));
             }
+            bounds::CORRECT_TIME_BUDGET_S.check(c.time_budget_s)?;
+            bounds::CORRECT_ENVS.check(c.envs as f64)?;
             for (name, v) in [
                 ("target_r_norm", c.target_r_norm),
                 ("accept_threshold", c.accept_threshold),
@@ -442,6 +556,7 @@ impl Recipe {
                         "`tracker_budget_s` must be a duration in seconds",
                     ));
                 }
+                bounds::CORRECT_TRACKER_BUDGET_S.check(c.tracker_budget_s)?;
                 if !(1..=8).contains(&c.tracker_frames) {
                     return Err(err("[correct]", "`tracker_frames` must be in 1..=8"));
                 }
@@ -449,6 +564,17 @@ impl Recipe {
         }
         if let Some(d) = &self.debias {
             d.validate().map_err(|e| err("[debias]", e.to_string()))?;
+            bounds::DEBIAS_ITERATIONS.check(d.iterations as f64)?;
+            bounds::DEBIAS_BATCH_SIZE.check(d.batch_size as f64)?;
+            bounds::DEBIAS_LAYERS.check(d.hidden.len() as f64)?;
+            for width in &d.hidden {
+                bounds::DEBIAS_WIDTH.check(*width as f64)?;
+            }
+            bounds::DEBIAS_LEARNING_RATE.check(d.learning_rate)?;
+            bounds::DEBIAS_WEIGHT_DECAY.check(d.weight_decay)?;
+            bounds::DEBIAS_HEIGHT_BAND_M.check(d.contacts.height_band_m)?;
+            bounds::DEBIAS_MAX_SPEED.check(d.contacts.max_speed_m_s)?;
+            bounds::DEBIAS_BLEND_S.check(d.contacts.blend_s)?;
         }
         Ok(self)
     }

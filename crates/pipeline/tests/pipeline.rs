@@ -554,3 +554,144 @@ fn a_class_tracker_runs_in_process_and_its_corrections_start_from_it() {
         assert!(from.contains("trackers"), "{from}");
     }
 }
+
+/// Every numeric field the tables' crates leave open has an upper bound:
+/// values past it are refused naming the table, the field and the bound, and
+/// the bound itself is accepted.
+#[test]
+fn numeric_recipe_fields_have_upper_bounds() {
+    let base = "[[ops]]\nop = \"noise\"\n";
+    let cases = [
+        (
+            "[correct]",
+            "time_budget_s",
+            "[correct]\ntime_budget_s = 1e308\n",
+        ),
+        ("[correct]", "envs", "[correct]\nenvs = 1000000\n"),
+        (
+            "[correct]",
+            "tracker_budget_s",
+            "[correct]\npolicy = \"class\"\ntracker_budget_s = 1e12\n",
+        ),
+        ("[vae]", "iterations", "[vae]\niterations = 1000000000000\n"),
+        ("[vae]", "min_clips", "[vae]\nmin_clips = 1000000\n"),
+        (
+            "[debias]",
+            "iterations",
+            "[correct]\n[debias]\niterations = 100000000\n",
+        ),
+        (
+            "[debias]",
+            "batch_size",
+            "[correct]\n[debias]\nbatch_size = 10000000\n",
+        ),
+        (
+            "[debias]",
+            "hidden[]",
+            "[correct]\n[debias]\nhidden = [100000]\n",
+        ),
+        (
+            "[debias]",
+            "hidden",
+            "[correct]\n[debias]\nhidden = [8, 8, 8, 8, 8, 8, 8, 8, 8]\n",
+        ),
+        (
+            "[debias]",
+            "learning_rate",
+            "[correct]\n[debias]\nlearning_rate = 10.0\n",
+        ),
+        (
+            "[debias]",
+            "weight_decay",
+            "[correct]\n[debias]\nweight_decay = 5.0\n",
+        ),
+        (
+            "[debias]",
+            "blend_s",
+            "[correct]\n[debias.contacts]\nblend_s = 1e9\n",
+        ),
+        (
+            "[debias]",
+            "height_band_m",
+            "[correct]\n[debias.contacts]\nheight_band_m = 1e9\n",
+        ),
+        (
+            "[debias]",
+            "max_speed_m_s",
+            "[correct]\n[debias.contacts]\nmax_speed_m_s = 1e9\n",
+        ),
+    ];
+    for (table, field, text) in cases {
+        let e = recipe_err(&format!("{base}{text}"));
+        assert!(
+            e.contains(table) && e.contains(field) && e.contains("bound"),
+            "{text}: {e}"
+        );
+    }
+    let e = recipe_err("[[ops]]\nop = \"mirror\"\ntolerance_m = 1e300\n");
+    assert!(e.contains("ops[0]") && e.contains("tolerance_m"), "{e}");
+    // The bounds themselves are accepted.
+    let at_bounds = format!(
+        "{base}[vae]\niterations = 100000\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
+         policy = \"class\"\ntracker_budget_s = 604800\n\
+         [debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
+    );
+    Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 14);
+}
+
+/// `plan::size` counts the graph `plan` makes without making it.
+#[test]
+fn plan_size_counts_what_plan_makes() {
+    let names: Vec<String> = [
+        "hug_A",
+        "hug_B",
+        "HDM_bd_kick_001_120",
+        "HDM_bd_kick_002_120",
+        "walk",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let recipes = [
+        "[[ops]]\nop = \"noise\"\ncopies = 3\n[[ops]]\nop = \"mirror\"\n",
+        "[[ops]]\nop = \"noise\"\n[vae]\ncopies = 2\n[interaction]\ncopies = 3\n",
+        "[[ops]]\nop = \"noise\"\ncopies = 2\n[vae]\ncopies = 4\n[correct]\n[debias]\n",
+        "[interaction]\ncopies = 2\n[correct]\nwarm_start = false\n",
+        "[vae]\ngroup_by = \"all\"\ncopies = 5\n[correct]\nwarm_start = false\n",
+        "[[ops]]\nop = \"mirror\"\n[vae]\ncopies = 2\n[correct]\npolicy = \"class\"\n",
+        "[[ops]]\nop = \"mirror\"\n[correct]\npolicy = \"class\"\n[debias]\n",
+    ];
+    for text in recipes {
+        let recipe = Recipe::from_toml_str(text).expect(text);
+        for clips in [0, 1, 2, names.len()] {
+            let names = &names[..clips];
+            let plan = pipeline::plan(&recipe, names, 7);
+            let made: u64 = plan
+                .jobs
+                .iter()
+                .filter(|j| matches!(j.kind.name(), "synthesize" | "vae" | "interaction"))
+                .map(|j| j.outputs.len() as u64)
+                .sum();
+            let corrections = plan
+                .jobs
+                .iter()
+                .filter(|j| matches!(j.kind.name(), "correct" | "correct_original"))
+                .count() as u64;
+            let trackers = plan
+                .jobs
+                .iter()
+                .filter(|j| j.kind.name() == "tracker")
+                .count() as u64;
+            let size = pipeline::plan::size(&recipe, names);
+            assert_eq!(size.outputs, made, "{text} over {clips} clips");
+            assert_eq!(size.trackers, trackers, "{text} over {clips} clips");
+            assert_eq!(size.corrections, corrections, "{text} over {clips} clips");
+            assert_eq!(
+                size.jobs,
+                plan.jobs.len() as u64,
+                "{text} over {clips} clips"
+            );
+        }
+    }
+}

@@ -71,8 +71,8 @@ impl Default for MirrorParams {
 
 impl MirrorParams {
     pub fn validate(&self) -> Result<(), SynthError> {
-        if !(self.tolerance_m.is_finite() && self.tolerance_m >= 0.0) {
-            return Err(SynthError::param("tolerance_m", "must be >= 0 metres"));
+        if !(self.tolerance_m.is_finite() && (0.0..=1.0).contains(&self.tolerance_m)) {
+            return Err(SynthError::param("tolerance_m", "must be in [0, 1] metres"));
         }
         Ok(())
     }

@@ -2,7 +2,13 @@
 //! `/internal/v1`.
 //!
 //! An API key is `mak_` followed by 64 hex digits (32 random bytes). Only its
-//! SHA-256 is stored; looking a key up is one indexed query on the hash.
+//! SHA-256 is stored; looking a key up is one indexed query on the hash, and
+//! a key found is remembered for [`KEY_CACHE_TTL`] ([`KeyCache`]), so a client
+//! polling a status costs one query per poll, not two.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use axum::extract::FromRequestParts;
 use axum::http::header::AUTHORIZATION;
@@ -20,6 +26,34 @@ use crate::startup::AppState;
 pub struct Tenant {
     pub id: Uuid,
     pub name: String,
+}
+
+/// How long a looked-up key is trusted without asking the database again
+/// (a revoked key works for at most this long on each coordinator).
+pub const KEY_CACHE_TTL: Duration = Duration::from_secs(10);
+
+/// Keys remembered at most (the cache is emptied when full).
+const KEY_CACHE_SIZE: usize = 10_000;
+
+/// Recently looked-up keys: key hash -> tenant and when it was looked up.
+#[derive(Debug, Clone, Default)]
+pub struct KeyCache(Arc<Mutex<HashMap<Vec<u8>, (Tenant, Instant)>>>);
+
+impl KeyCache {
+    fn get(&self, hash: &[u8]) -> Option<Tenant> {
+        let cache = self.0.lock().ok()?;
+        let (tenant, at) = cache.get(hash)?;
+        (at.elapsed() < KEY_CACHE_TTL).then(|| tenant.clone())
+    }
+
+    fn put(&self, hash: Vec<u8>, tenant: &Tenant) {
+        if let Ok(mut cache) = self.0.lock() {
+            if cache.len() >= KEY_CACHE_SIZE {
+                cache.clear();
+            }
+            cache.insert(hash, (tenant.clone(), Instant::now()));
+        }
+    }
 }
 
 /// Marker: the request carried the worker token.
@@ -87,15 +121,21 @@ impl FromRequestParts<AppState> for Tenant {
         let key = bearer(parts).ok_or_else(|| {
             ApiError::unauthorized("send your API key as `Authorization: Bearer <key>`")
         })?;
+        let hash = hash_key(key);
+        if let Some(tenant) = state.keys.get(&hash) {
+            return Ok(tenant);
+        }
         let row: Option<(Uuid, String)> = sqlx::query_as(
             "SELECT t.id, t.name FROM api_keys k JOIN tenants t ON t.id = k.tenant_id
              WHERE k.key_hash = $1 AND k.revoked_at IS NULL",
         )
-        .bind(hash_key(key))
+        .bind(&hash)
         .fetch_optional(&state.db)
         .await?;
         let (id, name) = row.ok_or_else(|| ApiError::unauthorized("unknown or revoked API key"))?;
-        Ok(Tenant { id, name })
+        let tenant = Tenant { id, name };
+        state.keys.put(hash, &tenant);
+        Ok(tenant)
     }
 }
 

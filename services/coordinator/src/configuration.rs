@@ -23,20 +23,63 @@ pub struct Config {
     /// `MOTIONAUG_WORKER_TOKEN`: shared secret of the internal worker API.
     pub worker_token: String,
     pub limits: Limits,
+    pub quotas: Quotas,
     pub queue: QueueConfig,
+}
+
+/// What each tenant may use (documented in docs/SERVICE.md and shown at
+/// `GET /v1/limits`). The same for every tenant; checked and taken in the
+/// transaction that stores the new dataset or augmentation, under the
+/// tenant's row lock (see `crate::quota`).
+#[derive(Debug, Clone)]
+pub struct Quotas {
+    /// `MOTIONAUG_QUOTA_OUTPUTS_PER_AUGMENTATION`: new clips one augmentation may
+    /// make (default 20000); more is a 422.
+    pub outputs_per_augmentation: u64,
+    /// `MOTIONAUG_QUOTA_ACTIVE_AUGMENTATIONS`: augmentations of a tenant that may be
+    /// unfinished at once (default 10); one more is a 429.
+    pub active_augmentations: u64,
+    /// `MOTIONAUG_QUOTA_CORRECTION_SECONDS`: correction budget (`[correct]
+    /// time_budget_s` x correction jobs) of a tenant's unfinished augmentations
+    /// together (default 1000000); more is a 429 (a 422 for one augmentation
+    /// that alone needs more).
+    pub correction_seconds: u64,
+    /// `MOTIONAUG_QUOTA_STORED_BYTES`: bytes a tenant may keep stored: uploaded
+    /// files, results and checkpoints (default 10 GiB). An upload that would pass
+    /// it, or a new augmentation once it is reached, is a 429.
+    pub stored_bytes: u64,
+}
+
+impl Default for Quotas {
+    fn default() -> Self {
+        Quotas {
+            outputs_per_augmentation: 20_000,
+            active_augmentations: 10,
+            correction_seconds: 1_000_000,
+            stored_bytes: 10 << 30,
+        }
+    }
 }
 
 /// Request limits (documented in docs/SERVICE.md).
 #[derive(Debug, Clone)]
 pub struct Limits {
-    /// `MOTIONAUG_MAX_UPLOAD_BYTES`: whole request body of an upload (default 256 MiB).
+    /// `MOTIONAUG_MAX_UPLOAD_BYTES`: whole request body of an upload (default 64 MiB).
     pub max_upload_bytes: usize,
     /// `MOTIONAUG_MAX_FILES`: files per upload, counting the entries of zips (default 1000).
     pub max_files: usize,
     /// `MOTIONAUG_MAX_FRAMES`: frames per clip (default 200000).
     pub max_frames: usize,
-    /// `MOTIONAUG_MAX_UNZIPPED_BYTES`: total bytes after unpacking zips (default 1 GiB).
+    /// `MOTIONAUG_MAX_UNZIPPED_BYTES`: total bytes after unpacking the zips of one
+    /// upload (default 128 MiB).
     pub max_unzipped_bytes: u64,
+    /// `MOTIONAUG_MAX_CONCURRENT_UPLOADS`: uploads read and checked at once; others
+    /// wait (default 4).
+    pub max_concurrent_uploads: usize,
+    /// `MOTIONAUG_UPLOAD_MEMORY_BYTES`: memory all uploads of the process may hold
+    /// together: bodies and unpacked zip entries (default 192 MiB, one largest
+    /// upload: 64 MiB of zip unpacking to 128 MiB).
+    pub upload_memory_bytes: u64,
     /// `MOTIONAUG_MAX_ARTIFACT_BYTES`: one result file or checkpoint from a worker (default 256 MiB).
     pub max_artifact_bytes: usize,
 }
@@ -62,10 +105,12 @@ pub struct QueueConfig {
 impl Default for Limits {
     fn default() -> Self {
         Limits {
-            max_upload_bytes: 256 << 20,
+            max_upload_bytes: 64 << 20,
             max_files: 1000,
             max_frames: 200_000,
-            max_unzipped_bytes: 1 << 30,
+            max_unzipped_bytes: 128 << 20,
+            max_concurrent_uploads: 4,
+            upload_memory_bytes: 192 << 20,
             max_artifact_bytes: 256 << 20,
         }
     }
@@ -117,6 +162,7 @@ impl Config {
             bail!("MOTIONAUG_WORKER_TOKEN must be at least 16 characters long");
         }
         let dl = Limits::default();
+        let dquota = Quotas::default();
         let dq = QueueConfig::default();
         let max_attempts = number("MOTIONAUG_MAX_ATTEMPTS", dq.max_attempts as u64)?;
         if !(1..=100).contains(&max_attempts) {
@@ -145,7 +191,7 @@ impl Config {
         if !(2..=1000).contains(&db_pool_size) {
             bail!("MOTIONAUG_DB_POOL_SIZE must be between 2 and 1000");
         }
-        Ok(Config {
+        let config = Config {
             database_url: required("DATABASE_URL")?,
             db_pool_size: db_pool_size as u32,
             redis_url: get("REDIS_URL").filter(|v| !v.is_empty()),
@@ -162,12 +208,46 @@ impl Config {
                 max_files: number("MOTIONAUG_MAX_FILES", dl.max_files as u64)? as usize,
                 max_frames: number("MOTIONAUG_MAX_FRAMES", dl.max_frames as u64)? as usize,
                 max_unzipped_bytes: number("MOTIONAUG_MAX_UNZIPPED_BYTES", dl.max_unzipped_bytes)?,
+                max_concurrent_uploads: number(
+                    "MOTIONAUG_MAX_CONCURRENT_UPLOADS",
+                    dl.max_concurrent_uploads as u64,
+                )?
+                .clamp(1, 1024) as usize,
+                upload_memory_bytes: number(
+                    "MOTIONAUG_UPLOAD_MEMORY_BYTES",
+                    dl.upload_memory_bytes,
+                )?,
                 max_artifact_bytes: number(
                     "MOTIONAUG_MAX_ARTIFACT_BYTES",
                     dl.max_artifact_bytes as u64,
                 )? as usize,
             },
+            quotas: Quotas {
+                outputs_per_augmentation: number(
+                    "MOTIONAUG_QUOTA_OUTPUTS_PER_AUGMENTATION",
+                    dquota.outputs_per_augmentation,
+                )?,
+                active_augmentations: number(
+                    "MOTIONAUG_QUOTA_ACTIVE_AUGMENTATIONS",
+                    dquota.active_augmentations,
+                )?,
+                correction_seconds: number(
+                    "MOTIONAUG_QUOTA_CORRECTION_SECONDS",
+                    dquota.correction_seconds,
+                )?,
+                stored_bytes: number("MOTIONAUG_QUOTA_STORED_BYTES", dquota.stored_bytes)?,
+            },
             queue,
-        })
+        };
+        let limits = &config.limits;
+        if limits.max_upload_bytes as u64 > limits.upload_memory_bytes {
+            bail!(
+                "MOTIONAUG_MAX_UPLOAD_BYTES ({}) is more than MOTIONAUG_UPLOAD_MEMORY_BYTES ({}): \
+                 such an upload could never be read",
+                limits.max_upload_bytes,
+                limits.upload_memory_bytes
+            );
+        }
+        Ok(config)
     }
 }

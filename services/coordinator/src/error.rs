@@ -3,7 +3,10 @@
 //! Every error says what a person can do about it; upload errors name the file,
 //! the line and (for recipes) the field that is wrong.
 
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::body::Body;
+use axum::extract::Request;
+use axum::http::{HeaderValue, Method, StatusCode, header};
+use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
@@ -32,6 +35,15 @@ pub struct Problem {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(nullable = false)]
     pub field: Option<String>,
+    /// The quota that was reached, as `GET /v1/limits` names it (e.g.
+    /// `active_augmentations`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
+    pub limit: Option<&'static str>,
+    /// That quota's value.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(nullable = false)]
+    pub max: Option<u64>,
 }
 
 /// The `Problem` response of the OpenAPI document, which every error answer uses.
@@ -62,6 +74,8 @@ impl ApiError {
             file: None,
             line: None,
             field: None,
+            limit: None,
+            max: None,
         }))
     }
 
@@ -93,6 +107,10 @@ impl ApiError {
         Self::new(StatusCode::PAYLOAD_TOO_LARGE, "Payload too large", detail)
     }
 
+    pub fn too_many(detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::TOO_MANY_REQUESTS, "Too many requests", detail)
+    }
+
     pub fn internal(detail: impl Into<String>) -> Self {
         Self::new(StatusCode::INTERNAL_SERVER_ERROR, "Internal error", detail)
     }
@@ -109,6 +127,13 @@ impl ApiError {
 
     pub fn with_field(mut self, field: impl Into<String>) -> Self {
         self.0.field = Some(field.into());
+        self
+    }
+
+    /// Names the quota that was reached and its value.
+    pub fn with_limit(mut self, limit: &'static str, max: u64) -> Self {
+        self.0.limit = Some(limit);
+        self.0.max = Some(max);
         self
     }
 
@@ -144,4 +169,71 @@ pub fn from_rejection(status: StatusCode, text: String) -> ApiError {
         return ApiError::too_large(text);
     }
     ApiError::new(status, "Bad request", text)
+}
+
+/// Largest body of a non-problem error answer that is kept as the problem's
+/// `detail` (axum's rejections are one line).
+const MAX_PLAIN_ERROR_BYTES: usize = 16 << 10;
+
+/// Middleware: every error answer is `application/problem+json`.
+///
+/// The handlers answer problems themselves; this catches the answers made
+/// before or around them, in plain text or with no body: axum's extractor
+/// rejections (a path id that is not a UUID, `?seed=abc`, a JSON body that
+/// does not match, a body over its limit), 405 for a method a route does not
+/// serve (its `Allow` header is kept) and anything a later route forgets.
+pub async fn problem_for_every_error(request: Request, next: Next) -> Response {
+    let method = request.method().clone();
+    let response = next.run(request).await;
+    let status = response.status();
+    let is_problem = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/problem+json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        return response;
+    }
+    let (mut parts, body) = response.into_parts();
+    let text = axum::body::to_bytes(body, MAX_PLAIN_ERROR_BYTES)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).trim().to_string())
+        .unwrap_or_default();
+    let detail = if !text.is_empty() {
+        text
+    } else if status == StatusCode::METHOD_NOT_ALLOWED {
+        let allowed = parts
+            .headers
+            .get(header::ALLOW)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("none");
+        format!("{method} is not allowed on this route; allowed: {allowed}")
+    } else {
+        status
+            .canonical_reason()
+            .unwrap_or("request refused")
+            .to_string()
+    };
+    let title = status.canonical_reason().unwrap_or("Error");
+    let problem = Problem {
+        kind: "about:blank",
+        title,
+        status: status.as_u16(),
+        detail,
+        file: None,
+        line: None,
+        field: None,
+        limit: None,
+        max: None,
+    };
+    let body = if method == Method::HEAD {
+        Vec::new()
+    } else {
+        serde_json::to_vec(&problem).unwrap_or_default()
+    };
+    parts.headers.remove(header::CONTENT_LENGTH);
+    parts.headers.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/problem+json"),
+    );
+    Response::from_parts(parts, Body::from(body))
 }

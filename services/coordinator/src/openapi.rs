@@ -11,15 +11,15 @@
 use axum::body::Bytes;
 use serde_json::{Value, json};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
-use utoipa::openapi::{KnownFormat, ObjectBuilder, RefOr, Schema, SchemaFormat, Type};
+use utoipa::openapi::{KnownFormat, ObjectBuilder, Ref, RefOr, Schema, SchemaFormat, Type};
 use utoipa::{Modify, OpenApi, PartialSchema, ToSchema};
 
 use crate::error::Problem;
 
 const DESCRIPTION: &str = "Upload motion-capture datasets, augment them with a recipe, \
 follow progress and download the results. All /v1 routes need `Authorization: Bearer <api key>`; \
-errors are application/problem+json. Limits (defaults, configurable): upload body 256 MiB, \
-1000 files per upload (zip entries count), 200000 frames per clip, 1 GiB unpacked zip content.";
+errors are application/problem+json. Every limit, recipe bound and tenant quota in force, \
+with the tenant's use, is at GET /v1/limits; a refused quota is named in the problem's `limit`.";
 
 #[derive(OpenApi)]
 #[openapi(
@@ -64,11 +64,34 @@ pub fn spec_path(route: &str) -> String {
     route.replace("{*", "{")
 }
 
-/// The document the router collected, with its paths written the OpenAPI way.
+/// The document the router collected, with its paths written the OpenAPI way
+/// and a 400 problem on every operation that reads a path, a query or a body
+/// (what the router answers when one of them cannot be read).
 pub fn finish(mut api: utoipa::openapi::OpenApi) -> utoipa::openapi::OpenApi {
     api.paths.paths = std::mem::take(&mut api.paths.paths)
         .into_iter()
-        .map(|(path, item)| (spec_path(&path), item))
+        .map(|(path, mut item)| {
+            for op in [
+                &mut item.get,
+                &mut item.put,
+                &mut item.post,
+                &mut item.delete,
+                &mut item.patch,
+            ]
+            .into_iter()
+            .flatten()
+            {
+                let reads_input = op.request_body.is_some()
+                    || op.parameters.as_ref().is_some_and(|p| !p.is_empty());
+                if reads_input {
+                    op.responses
+                        .responses
+                        .entry("400".to_string())
+                        .or_insert_with(|| Ref::from_response_name("Problem").into());
+                }
+            }
+            (spec_path(&path), item)
+        })
         .collect();
     api
 }

@@ -50,8 +50,11 @@ pub enum Lease {
         kind: String,
         claimed_for_s: f64,
     },
-    /// The job was cancelled (or its dataset deleted): stop working on it.
+    /// The job was cancelled: stop working on it.
     Cancelled,
+    /// There is no such job (its dataset was deleted, or it never existed):
+    /// stop working on it.
+    Missing,
     /// The lease is no longer this worker's (expired and re-claimed, or finished).
     Stale,
 }
@@ -190,7 +193,8 @@ async fn check_lease(
     .fetch_optional(&mut **tx)
     .await?;
     Ok(match row {
-        None | Some((JobState::Cancelled, ..)) => Lease::Cancelled,
+        None => Lease::Missing,
+        Some((JobState::Cancelled, ..)) => Lease::Cancelled,
         Some((JobState::Running, current, augmentation_id, kind, claimed_for_s))
             if current == epoch =>
         {
@@ -386,7 +390,7 @@ pub async fn complete(
                 Completion::Refused(Lease::Stale)
             }
         }
-        Lease::Cancelled => Completion::Refused(Lease::Cancelled),
+        Lease::Cancelled | Lease::Missing => Completion::Refused(status),
     };
     tx.commit().await?;
     Ok(outcome)

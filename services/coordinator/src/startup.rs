@@ -14,12 +14,14 @@ use sqlx::postgres::PgPoolOptions;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 
+use crate::auth::KeyCache;
 use crate::configuration::Config;
 use crate::events::{Event, Events};
 use crate::metrics::{FailureLabel, Metrics, RouteLabel};
 use crate::openapi::{self, OpenApiJson};
 use crate::state::JobState;
-use crate::{queue, routes};
+use crate::upload_memory::UploadMemory;
+use crate::{error, queue, routes};
 
 /// Shared state of the request handlers.
 #[derive(Clone)]
@@ -28,6 +30,10 @@ pub struct AppState {
     pub config: Arc<Config>,
     pub events: Events,
     pub metrics: Arc<Metrics>,
+    /// Upload slots and the memory budget of uploads.
+    pub uploads: UploadMemory,
+    /// API keys looked up recently.
+    pub keys: KeyCache,
 }
 
 /// Connects to Postgres, waiting up to a minute for it to come up (containers
@@ -69,9 +75,15 @@ impl Application {
         let listener = TcpListener::bind(&config.listen)
             .await
             .with_context(|| format!("cannot listen on {} (MOTIONAUG_LISTEN)", config.listen))?;
+        let uploads = UploadMemory::new(
+            config.limits.max_concurrent_uploads,
+            config.limits.upload_memory_bytes,
+        );
         Ok(Application {
             listener,
             state: AppState {
+                uploads,
+                keys: KeyCache::default(),
                 db,
                 config: Arc::new(config),
                 events,
@@ -113,6 +125,7 @@ pub fn router(state: AppState) -> Router {
     let document = OpenApiJson::new(&openapi::finish(api));
     routes
         .layer(Extension(document))
+        .layer(middleware::from_fn(error::problem_for_every_error))
         .layer(middleware::from_fn_with_state(
             state.clone(),
             track_requests,

@@ -2,7 +2,8 @@
 //!
 //! A job's state is stored in `jobs.state`, a `text` column whose CHECK constraint
 //! lists exactly the names of [`JobState`]; an augmentation's state is never stored,
-//! it is derived from its jobs' states when it is read. Every comparison, bind and
+//! it is derived when it is read from its jobs' counts per state (kept in its row
+//! by triggers on `jobs`, migration 0003). Every comparison, bind and
 //! API answer goes through these enums, so a misspelt state cannot compile.
 
 use std::fmt;

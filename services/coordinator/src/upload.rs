@@ -14,6 +14,7 @@ use motionaug_protocol::clip::{self, LoadedSkeleton};
 
 use crate::configuration::Limits;
 use crate::error::ApiError;
+use crate::upload_memory::{self, Reservation};
 
 /// One uploaded file (or zip entry).
 #[derive(Debug, Clone)]
@@ -46,6 +47,62 @@ enum Kind {
     Asf,
     Amc,
     Zip,
+}
+
+/// What a clip's name may be: it names the result files (`<clip>__00_noise_000.bvh`,
+/// `work/correct/<clip>/report.json`), so it is one safe path segment.
+pub const CLIP_NAME_RULE: &str = "a clip's name (the file name without its extension) may hold \
+     letters, digits, `.`, `_` and `-`, must not start with `.` and has at most 100 characters";
+
+/// Longest clip name.
+const MAX_CLIP_NAME: usize = 100;
+
+/// Whether `name` is a clip name by [`CLIP_NAME_RULE`].
+pub fn is_clip_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= MAX_CLIP_NAME
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+}
+
+/// A multipart file name is a bare file name: no folders (`/`, `\`), no `.`
+/// or `..`, no control characters. Such names are refused, never cut down.
+pub fn check_part_name(name: &str) -> Result<(), ApiError> {
+    let bad = name.is_empty()
+        || name.contains(['/', '\\'])
+        || name == "."
+        || name == ".."
+        || name.chars().any(char::is_control)
+        || name.len() > 255;
+    if bad {
+        return Err(ApiError::unprocessable(format!(
+            "file name `{name}` is not a bare file name; send files without folders (no `/` or \
+             `\\`, not `.` or `..`), e.g. `walk.bvh`"
+        ))
+        .with_file(name)
+        .with_field("file"));
+    }
+    Ok(())
+}
+
+/// A zip entry's path stays inside the zip: relative, `/`-separated, no `..`.
+fn check_entry_path(zip_label: &str, path: &str) -> Result<(), ApiError> {
+    let segments: Vec<&str> = path.split('/').collect();
+    let bad = path.starts_with('/')
+        || path.contains('\\')
+        || path.chars().any(char::is_control)
+        || segments.iter().any(|s| *s == ".." || s.contains(':'));
+    if bad {
+        let label = format!("{zip_label}/{path}");
+        return Err(ApiError::unprocessable(format!(
+            "{zip_label}: entry `{path}` points outside the zip (absolute, `..` or `\\` in its \
+             path); zip the files with relative paths"
+        ))
+        .with_file(label));
+    }
+    Ok(())
 }
 
 fn base_name(path: &str) -> &str {
@@ -83,8 +140,15 @@ fn is_ignorable_entry(path: &str) -> bool {
         || base.eq_ignore_ascii_case("readme.txt")
 }
 
-/// Replaces every zip by its entries, enforcing the file-count and unpacked-size limits.
-pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<UploadFile>, ApiError> {
+/// Replaces every zip by its entries, enforcing the file-count and unpacked-size
+/// limits while inflating: each entry is read in 64 KiB steps into memory
+/// reserved from the upload budget, and refused as soon as the upload's
+/// unpacked bytes pass the limit (a zip bomb costs at most the limit).
+pub fn expand_zips(
+    files: Vec<UploadFile>,
+    limits: &Limits,
+    reservation: &mut Reservation,
+) -> Result<Vec<UploadFile>, ApiError> {
     let mut out = Vec::new();
     let mut unpacked: u64 = 0;
     let too_many = || {
@@ -113,27 +177,42 @@ pub fn expand_zips(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Upload
                 continue;
             }
             let path = entry.name().map_err(bad_zip)?.to_string();
+            check_entry_path(&file.label, &path)?;
             if is_ignorable_entry(&path) {
                 continue;
             }
             let label = format!("{}/{}", file.label, path);
+            let too_large = || {
+                ApiError::too_large(format!(
+                    "{label}: the upload unpacks to more than {} bytes",
+                    limits.max_unzipped_bytes
+                ))
+                .with_file(&label)
+            };
             let remaining = limits.max_unzipped_bytes.saturating_sub(unpacked);
+            if entry.size() > remaining {
+                // The declared size already passes the limit.
+                return Err(too_large());
+            }
+            // Never more than the limit (plus the byte that shows it was passed).
+            let cap = usize::try_from(remaining.saturating_add(1)).unwrap_or(usize::MAX);
             let mut bytes = Vec::new();
-            (&mut entry)
-                .take(remaining + 1)
-                .read_to_end(&mut bytes)
-                .map_err(|e| {
+            let mut step = vec![0u8; 64 << 10];
+            loop {
+                let n = entry.read(&mut step).map_err(|e| {
                     ApiError::unprocessable(format!("{label}: cannot unpack: {e}"))
                         .with_file(&label)
                 })?;
-            unpacked += bytes.len() as u64;
-            if unpacked > limits.max_unzipped_bytes {
-                return Err(ApiError::too_large(format!(
-                    "{label}: the zip unpacks to more than {} bytes",
-                    limits.max_unzipped_bytes
-                ))
-                .with_file(&label));
+                if n == 0 {
+                    break;
+                }
+                if (bytes.len() + n) as u64 > remaining {
+                    return Err(too_large());
+                }
+                upload_memory::append(&mut bytes, &step[..n], cap, reservation)
+                    .map_err(|e| e.with_file(&label))?;
             }
+            unpacked += bytes.len() as u64;
             let entry_file = UploadFile {
                 name: base_name(&path).to_string(),
                 label,
@@ -194,9 +273,14 @@ fn pick_skeleton<'a>(
     })
 }
 
-/// Parses every file; the first problem rejects the upload.
-pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<ParsedClip>, ApiError> {
-    let files = expand_zips(files, limits)?;
+/// Parses every file; the first problem rejects the upload. Zips are unpacked
+/// into memory reserved from `reservation`.
+pub fn parse_upload(
+    files: Vec<UploadFile>,
+    limits: &Limits,
+    reservation: &mut Reservation,
+) -> Result<Vec<ParsedClip>, ApiError> {
+    let files = expand_zips(files, limits, reservation)?;
     let mut skeletons = Vec::new();
     let mut motions = Vec::new();
     for file in files {
@@ -237,6 +321,13 @@ pub fn parse_upload(files: Vec<UploadFile>, limits: &Limits) -> Result<Vec<Parse
             .with_file(&file.label));
         }
         let name = stem(&file.name).to_string();
+        if !is_clip_name(&name) {
+            return Err(ApiError::unprocessable(format!(
+                "{}: `{name}` cannot be a clip name: {CLIP_NAME_RULE}; rename the file",
+                file.label
+            ))
+            .with_file(&file.label));
+        }
         if let Some(other) = clips.iter().find(|c| c.name == name) {
             return Err(ApiError::unprocessable(format!(
                 "{}: a clip named `{name}` was already uploaded as {}; clip names must be unique",
@@ -302,5 +393,46 @@ mod tests {
         };
         assert_eq!(kind_of(&f("A.BVH")).unwrap(), Kind::Bvh);
         assert!(kind_of(&f("notes.txt")).is_err());
+    }
+
+    #[test]
+    fn unsafe_names_are_refused() {
+        for name in ["walk", "HDM_bd_kick-1.v2", "a"] {
+            assert!(is_clip_name(name), "{name}");
+        }
+        for name in [
+            "",
+            ".",
+            "..",
+            ".hidden",
+            "my walk",
+            "a/b",
+            "a\\b",
+            "é",
+            &"x".repeat(101),
+        ] {
+            assert!(!is_clip_name(name), "{name}");
+        }
+        assert!(check_part_name("walk.bvh").is_ok());
+        for name in [
+            "../../etc/x.bvh",
+            "/etc/abs.bvh",
+            "..\\..\\evil.bvh",
+            "..",
+            "a\nb.bvh",
+            "",
+        ] {
+            assert!(check_part_name(name).is_err(), "{name}");
+        }
+        assert!(check_entry_path("d.zip", "dir/walk.bvh").is_ok());
+        for path in [
+            "../../escape.bvh",
+            "/abs.bvh",
+            "a/../b.bvh",
+            "..\\x.bvh",
+            "C:/x.bvh",
+        ] {
+            assert!(check_entry_path("d.zip", path).is_err(), "{path}");
+        }
     }
 }

@@ -41,6 +41,7 @@ fn main() {
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-'));
     type Scenario = fn() -> anyhow::Result<()>;
     let scenarios: Vec<(&str, Scenario)> = vec![
+        ("worker_help_and_version", worker_help_and_version),
         (
             "worker_killed_mid_job",
             || block_on(worker_killed_mid_job()),
@@ -90,6 +91,50 @@ fn main() {
     if failed > 0 {
         std::process::exit(1);
     }
+}
+
+/// `motionaug-worker --help` and `--version` print and exit at once, even with
+/// a coordinator configured (they never start a worker).
+fn worker_help_and_version() -> anyhow::Result<()> {
+    let binary = env!("CARGO_BIN_EXE_motionaug-worker");
+    for (arg, expected) in [
+        ("--help", "MOTIONAUG_COORDINATOR_URL"),
+        ("-h", "Usage: motionaug-worker"),
+        (
+            "--version",
+            concat!("motionaug-worker ", env!("CARGO_PKG_VERSION")),
+        ),
+        ("-V", "motionaug-worker "),
+    ] {
+        let mut child = Command::new(binary)
+            .arg(arg)
+            .env(
+                "MOTIONAUG_COORDINATOR_URL",
+                format!("http://127.0.0.1:{}", free_port()),
+            )
+            .env("MOTIONAUG_WORKER_TOKEN", TOKEN)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let status = loop {
+            if let Some(status) = child.try_wait()? {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                anyhow::bail!("`motionaug-worker {arg}` started a worker instead of exiting");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let mut stdout = String::new();
+        if let Some(mut out) = child.stdout.take() {
+            out.read_to_string(&mut stdout)?;
+        }
+        ensure!(status.success(), "{arg}: exit {status}");
+        ensure!(stdout.contains(expected), "{arg}: {stdout}");
+    }
+    Ok(())
 }
 
 fn block_on(f: impl std::future::Future<Output = anyhow::Result<()>>) -> anyhow::Result<()> {

@@ -26,10 +26,10 @@ use crate::auth::Tenant;
 use crate::error::{ApiError, Problem};
 use crate::events::Event;
 use crate::openapi::{Binary, Recipe};
-use crate::queue;
 use crate::routes::datasets;
 use crate::startup::AppState;
 use crate::state::{AugmentationState, JobCounts, JobState};
+use crate::{queue, quota};
 
 /// A job that failed for good.
 #[derive(Debug, Serialize, Clone, PartialEq, ToSchema)]
@@ -183,6 +183,7 @@ fn to_json<T: Serialize>(value: &T) -> Result<Value, ApiError> {
         (status = 404, response = Problem),
         (status = 413, response = Problem),
         (status = 422, response = Problem),
+        (status = 429, response = Problem),
     )
 )]
 pub async fn create(
@@ -202,6 +203,14 @@ pub async fn create(
     .bind(dataset_id)
     .fetch_all(&state.db)
     .await?;
+    // Sized before it is planned: a recipe over the quota is never planned.
+    let names: Vec<String> = clips.iter().map(|c| c.1.clone()).collect();
+    let size = pipeline::plan::size(&recipe, &names);
+    let correction_seconds = recipe.correct.as_ref().map_or(0.0, |c| {
+        size.corrections as f64 * c.time_budget_s + size.trackers as f64 * c.tracker_budget_s
+    });
+    let quotas = &state.config.quotas;
+    quota::check_augmentation_size(quotas, size.outputs, correction_seconds)?;
     let jobs = graph(&recipe, &clips, seed)?;
     if jobs.is_empty() {
         return Err(ApiError::unprocessable(
@@ -210,56 +219,41 @@ pub async fn create(
         )
         .with_file("recipe"));
     }
+    let mut kinds: BTreeMap<&'static str, i64> = BTreeMap::new();
+    for job in &jobs {
+        *kinds.entry(job.kind).or_default() += 1;
+    }
     let id = Uuid::new_v4();
     let mut tx = state.db.begin().await?;
+    quota::lock_tenant(&mut tx, tenant.id).await?;
+    let usage = quota::usage(&mut *tx, tenant.id).await?;
+    quota::check_new_augmentation(quotas, &usage, correction_seconds)?;
     sqlx::query(
-        "INSERT INTO augmentations (id, tenant_id, dataset_id, recipe, seed) VALUES ($1, $2, $3, $4, $5)",
+        "INSERT INTO augmentations (id, tenant_id, dataset_id, recipe, seed, kinds, outputs,
+                                    correction_seconds)
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
     )
     .bind(id)
     .bind(tenant.id)
     .bind(dataset_id)
     .bind(sqlx::types::Json(&recipe_value))
     .bind(seed as i64)
+    .bind(sqlx::types::Json(&kinds))
+    .bind(size.outputs as i64)
+    .bind(correction_seconds)
     .execute(&mut *tx)
     .await?;
-    let mut ids: HashMap<String, Uuid> = HashMap::with_capacity(jobs.len());
-    let mut kinds_used: Vec<&'static str> = Vec::new();
-    for job in jobs {
-        let job_id = Uuid::new_v4();
-        sqlx::query(
-            "INSERT INTO jobs (id, augmentation_id, key, kind, state, input, max_attempts)
-             VALUES ($1, $2, $3, $4, 'queued', $5, $6)",
-        )
-        .bind(job_id)
-        .bind(id)
-        .bind(&job.key)
-        .bind(job.kind)
-        .bind(sqlx::types::Json(&job.input))
-        .bind(state.config.queue.max_attempts)
-        .execute(&mut *tx)
-        .await?;
-        for dep in &job.deps {
-            let dep_id = ids.get(dep).ok_or_else(|| {
-                ApiError::internal(format!("{}: input {dep} comes later", job.key))
-            })?;
-            sqlx::query("INSERT INTO job_dependencies (job_id, depends_on) VALUES ($1, $2)")
-                .bind(job_id)
-                .bind(dep_id)
-                .execute(&mut *tx)
-                .await?;
-        }
-        ids.insert(job.key, job_id);
-        if !kinds_used.contains(&job.kind) {
-            kinds_used.push(job.kind);
-        }
-    }
+    let job_count = jobs.len();
+    insert_jobs(&mut tx, id, jobs, state.config.queue.max_attempts).await?;
     tx.commit().await?;
     tracing::info!(tenant = %tenant.name, augmentation = %id, dataset = %dataset_id,
-                   jobs = ids.len(), "augmentation queued");
-    for kind in kinds_used {
+                   jobs = job_count, "augmentation queued");
+    for kind in kinds.keys() {
         state
             .events
-            .publish(Event::Wake { kind: kind.into() })
+            .publish(Event::Wake {
+                kind: kind.to_string(),
+            })
             .await;
     }
     Ok((
@@ -273,74 +267,132 @@ pub async fn create(
         .into_response())
 }
 
-/// Reads the status; `None` when it does not exist or belongs to another tenant.
-pub async fn load_status(
-    state: &AppState,
-    tenant_id: Uuid,
-    id: Uuid,
-) -> Result<Option<AugmentationStatus>, ApiError> {
-    // One statement, so the cancellation mark and the job counts come from the
-    // same snapshot (a cancel between two reads would look like a failure). One
-    // row per state of its jobs (one row with no state when it has none).
-    type Row = (
-        Uuid,
-        Option<DateTime<Utc>>,
-        DateTime<Utc>,
-        Option<JobState>,
-        i64,
-        f64,
-    );
-    let rows: Vec<Row> = sqlx::query_as(
-        "SELECT a.dataset_id, a.cancelled_at, a.created_at,
-                j.state, count(j.id), COALESCE(sum(j.progress), 0)::float8
-         FROM augmentations a LEFT JOIN jobs j ON j.augmentation_id = a.id
-         WHERE a.id = $1 AND a.tenant_id = $2
-         GROUP BY a.id, j.state",
-    )
-    .bind(id)
-    .bind(tenant_id)
-    .fetch_all(&state.db)
-    .await?;
-    let Some(&(dataset_id, cancelled_at, created_at, ..)) = rows.first() else {
-        return Ok(None);
+/// Jobs inserted per statement.
+const JOBS_PER_INSERT: usize = 1000;
+
+/// Inserts the graph's jobs (in plan order, which is their queue order) and
+/// their dependency edges, a thousand per statement.
+async fn insert_jobs(
+    tx: &mut sqlx::Transaction<'_, sqlx::Postgres>,
+    augmentation_id: Uuid,
+    jobs: Vec<NewJob>,
+    max_attempts: i32,
+) -> Result<(), ApiError> {
+    let ids: HashMap<&str, Uuid> = jobs
+        .iter()
+        .map(|job| (job.key.as_str(), Uuid::new_v4()))
+        .collect();
+    let id_of = |key: &str| {
+        ids.get(key)
+            .copied()
+            .ok_or_else(|| ApiError::internal(format!("the plan names no job `{key}`")))
     };
-    let mut jobs = JobCounts::default();
-    // Succeeded jobs count whole, the others by their reported progress.
-    let mut done = 0.0;
-    for (.., job_state, count, progress) in rows {
-        if let Some(job_state) = job_state {
-            jobs.add(job_state, count);
-            done += if job_state == JobState::Succeeded {
-                count as f64
-            } else {
-                progress
-            };
+    for chunk in jobs.chunks(JOBS_PER_INSERT) {
+        let job_ids = chunk
+            .iter()
+            .map(|j| id_of(&j.key))
+            .collect::<Result<Vec<_>, _>>()?;
+        let keys: Vec<&str> = chunk.iter().map(|j| j.key.as_str()).collect();
+        let kinds: Vec<&str> = chunk.iter().map(|j| j.kind).collect();
+        let inputs: Vec<&Value> = chunk.iter().map(|j| &j.input).collect();
+        sqlx::query(
+            "INSERT INTO jobs (id, augmentation_id, key, kind, state, input, max_attempts)
+             SELECT t.id, $1, t.key, t.kind, $2, i.input, $3
+             FROM unnest($4::uuid[], $5::text[], $6::text[]) WITH ORDINALITY AS t (id, key, kind, n)
+             JOIN jsonb_array_elements($7::jsonb) WITH ORDINALITY AS i (input, n) ON i.n = t.n
+             ORDER BY t.n",
+        )
+        .bind(augmentation_id)
+        .bind(JobState::Queued)
+        .bind(max_attempts)
+        .bind(&job_ids)
+        .bind(&keys)
+        .bind(&kinds)
+        .bind(sqlx::types::Json(&inputs))
+        .execute(&mut **tx)
+        .await?;
+        let mut from = Vec::new();
+        let mut to = Vec::new();
+        for (job, job_id) in chunk.iter().zip(&job_ids) {
+            for dep in &job.deps {
+                from.push(*job_id);
+                to.push(id_of(dep)?);
+            }
+        }
+        if !from.is_empty() {
+            sqlx::query(
+                "INSERT INTO job_dependencies (job_id, depends_on)
+                 SELECT * FROM unnest($1::uuid[], $2::uuid[])",
+            )
+            .bind(&from)
+            .bind(&to)
+            .execute(&mut **tx)
+            .await?;
         }
     }
-    let kinds: Vec<(String, i64)> =
-        sqlx::query_as("SELECT kind, count(*) FROM jobs WHERE augmentation_id = $1 GROUP BY kind")
-            .bind(id)
-            .fetch_all(&state.db)
-            .await?;
-    let errors: Vec<(Uuid, String, Option<String>, String)> = sqlx::query_as(
-        "SELECT id, key, input->>'clip_name', error FROM jobs
-         WHERE augmentation_id = $1 AND state = $2 AND error IS NOT NULL ORDER BY seq",
-    )
-    .bind(id)
-    .bind(JobState::Failed)
-    .fetch_all(&state.db)
-    .await?;
-    Ok(Some(AugmentationStatus {
-        id,
-        dataset_id,
-        status: AugmentationState::of_jobs(cancelled_at.is_some(), &jobs),
+    Ok(())
+}
+
+/// An augmentation's row with its job summary (migration 0003: counts per
+/// state and `done`, maintained with the jobs).
+#[derive(sqlx::FromRow)]
+struct SummaryRow {
+    id: Uuid,
+    dataset_id: Uuid,
+    cancelled_at: Option<DateTime<Utc>>,
+    created_at: DateTime<Utc>,
+    jobs_queued: i32,
+    jobs_running: i32,
+    jobs_succeeded: i32,
+    jobs_failed: i32,
+    jobs_cancelled: i32,
+    done: f64,
+    kinds: sqlx::types::Json<BTreeMap<String, i64>>,
+}
+
+/// `SELECT` of a [`SummaryRow`] from `augmentations`, then `$rest`.
+macro_rules! select_summary {
+    ($rest:literal) => {
+        concat!(
+            "SELECT id, dataset_id, cancelled_at, created_at, jobs_queued, jobs_running, \
+             jobs_succeeded, jobs_failed, jobs_cancelled, done, kinds FROM augmentations ",
+            $rest
+        )
+    };
+}
+
+/// The status of a summary row, with its failed jobs' errors (read only when
+/// some job failed).
+async fn status_of(state: &AppState, row: SummaryRow) -> Result<AugmentationStatus, ApiError> {
+    let mut jobs = JobCounts::default();
+    jobs.add(JobState::Queued, row.jobs_queued.into());
+    jobs.add(JobState::Running, row.jobs_running.into());
+    jobs.add(JobState::Succeeded, row.jobs_succeeded.into());
+    jobs.add(JobState::Failed, row.jobs_failed.into());
+    jobs.add(JobState::Cancelled, row.jobs_cancelled.into());
+    let errors: Vec<(Uuid, String, Option<String>, String)> = if jobs.failed > 0 {
+        sqlx::query_as(
+            "SELECT id, key, input->>'clip_name', error FROM jobs
+             WHERE augmentation_id = $1 AND state = $2 AND error IS NOT NULL ORDER BY seq",
+        )
+        .bind(row.id)
+        .bind(JobState::Failed)
+        .fetch_all(&state.db)
+        .await?
+    } else {
+        Vec::new()
+    };
+    Ok(AugmentationStatus {
+        id: row.id,
+        dataset_id: row.dataset_id,
+        status: AugmentationState::of_jobs(row.cancelled_at.is_some(), &jobs),
         progress: if jobs.total == 0 {
             1.0
         } else {
-            (done / jobs.total as f64).clamp(0.0, 1.0)
+            (row.done / jobs.total as f64).clamp(0.0, 1.0)
         },
         jobs,
-        kinds: kinds.into_iter().collect(),
+        kinds: row.kinds.0,
         errors: errors
             .into_iter()
             .map(|(job, key, clip, error)| JobError {
@@ -350,8 +402,30 @@ pub async fn load_status(
                 error,
             })
             .collect(),
-        created_at,
-    }))
+        created_at: row.created_at,
+    })
+}
+
+/// Reads the status; `None` when it does not exist or belongs to another tenant.
+///
+/// One lookup by primary key (the cancellation mark and the job counts are in
+/// the same row, so they come from one snapshot), and one indexed query of the
+/// failed jobs' errors when there are any.
+pub async fn load_status(
+    state: &AppState,
+    tenant_id: Uuid,
+    id: Uuid,
+) -> Result<Option<AugmentationStatus>, ApiError> {
+    let row: Option<SummaryRow> =
+        sqlx::query_as(select_summary!("WHERE id = $1 AND tenant_id = $2"))
+            .bind(id)
+            .bind(tenant_id)
+            .fetch_optional(&state.db)
+            .await?;
+    match row {
+        Some(row) => Ok(Some(status_of(state, row).await?)),
+        None => Ok(None),
+    }
 }
 
 /// Status, progress and job counts
@@ -397,17 +471,16 @@ pub async fn list(
     Path(dataset_id): Path<Uuid>,
 ) -> Result<Json<AugmentationList>, ApiError> {
     datasets::find(&state, &tenant, dataset_id).await?;
-    let ids: Vec<Uuid> = sqlx::query_scalar(
-        "SELECT id FROM augmentations WHERE dataset_id = $1 ORDER BY created_at, id",
-    )
+    let rows: Vec<SummaryRow> = sqlx::query_as(select_summary!(
+        "WHERE dataset_id = $1 AND tenant_id = $2 ORDER BY created_at, id"
+    ))
     .bind(dataset_id)
+    .bind(tenant.id)
     .fetch_all(&state.db)
     .await?;
-    let mut out = Vec::with_capacity(ids.len());
-    for id in ids {
-        if let Some(status) = load_status(&state, tenant.id, id).await? {
-            out.push(status);
-        }
+    let mut out = Vec::with_capacity(rows.len());
+    for row in rows {
+        out.push(status_of(&state, row).await?);
     }
     Ok(Json(AugmentationList { augmentations: out }))
 }

@@ -10,12 +10,14 @@ use utoipa::ToSchema;
 use uuid::Uuid;
 
 use crate::auth::Tenant;
+use crate::configuration::Limits;
 use crate::error::{ApiError, Problem, from_rejection};
 use crate::events::Event;
 use crate::openapi::DatasetUpload;
-use crate::queue;
 use crate::startup::AppState;
-use crate::upload::{UploadFile, parse_upload};
+use crate::upload::{UploadFile, check_part_name, parse_upload};
+use crate::upload_memory::{self, Reservation};
+use crate::{queue, quota};
 
 /// A stored clip.
 #[derive(Debug, Serialize, sqlx::FromRow, ToSchema)]
@@ -57,14 +59,17 @@ pub struct DatasetList {
 }
 
 /// Reads the multipart body: `file` parts (any number) and an optional `name`.
+/// Every byte is reserved from the upload memory budget as it streams in.
 async fn read_parts(
     mut multipart: Multipart,
-    max_files: usize,
+    limits: &Limits,
+    reservation: &mut Reservation,
 ) -> Result<(Option<String>, Vec<UploadFile>), ApiError> {
+    let max_files = limits.max_files;
     let mut name = None;
     let mut files = Vec::new();
     loop {
-        let field = match multipart.next_field().await {
+        let mut field = match multipart.next_field().await {
             Ok(Some(field)) => field,
             Ok(None) => break,
             Err(e) => return Err(from_rejection(e.status(), e.body_text())),
@@ -73,19 +78,28 @@ async fn read_parts(
             Some("file") => {
                 let file_name = field
                     .file_name()
-                    .map(|n| n.rsplit(['/', '\\']).next().unwrap_or(n).to_string())
+                    .map(str::to_string)
                     .filter(|n| !n.is_empty())
                     .ok_or_else(|| {
                         ApiError::bad_request("every `file` part needs a filename")
                             .with_field("file")
                     })?;
-                let bytes = field.bytes().await.map_err(|e| {
+                check_part_name(&file_name)?;
+                let mut bytes = Vec::new();
+                while let Some(chunk) = field.chunk().await.map_err(|e| {
                     from_rejection(e.status(), format!("{file_name}: {}", e.body_text()))
-                })?;
+                })? {
+                    upload_memory::append(
+                        &mut bytes,
+                        &chunk,
+                        limits.max_upload_bytes,
+                        reservation,
+                    )?;
+                }
                 files.push(UploadFile {
                     label: file_name.clone(),
                     name: file_name,
-                    bytes: bytes.to_vec(),
+                    bytes,
                 });
                 if files.len() > max_files {
                     return Err(ApiError::too_large(format!(
@@ -94,11 +108,18 @@ async fn read_parts(
                 }
             }
             Some("name") => {
-                let text = field
-                    .text()
+                let mut text = Vec::new();
+                while let Some(chunk) = field
+                    .chunk()
                     .await
-                    .map_err(|e| from_rejection(e.status(), e.body_text()))?;
-                let text = text.trim().to_string();
+                    .map_err(|e| from_rejection(e.status(), e.body_text()))?
+                {
+                    text.extend_from_slice(&chunk);
+                    if text.len() > 1024 {
+                        break;
+                    }
+                }
+                let text = String::from_utf8_lossy(&text).trim().to_string();
                 if text.is_empty() || text.len() > 200 {
                     return Err(
                         ApiError::unprocessable("`name` must be 1 to 200 characters")
@@ -142,6 +163,8 @@ async fn read_parts(
         (status = 401, response = Problem),
         (status = 413, response = Problem),
         (status = 422, response = Problem),
+        (status = 429, response = Problem),
+        (status = 503, response = Problem),
     )
 )]
 pub async fn create(
@@ -151,14 +174,28 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     let multipart = multipart.map_err(|e| from_rejection(e.status(), e.body_text()))?;
     let limits = state.config.limits.clone();
-    let (name, files) = read_parts(multipart, limits.max_files).await?;
+    // Held until the upload is stored or refused: a slot, and the memory of
+    // its body and unpacked zips.
+    let mut reservation = state.uploads.start().await;
+    let (name, files) = read_parts(multipart, &limits, &mut reservation).await?;
     let default_name = files[0].name.clone();
-    let clips = tokio::task::spawn_blocking(move || parse_upload(files, &limits))
-        .await
-        .map_err(|e| ApiError::internal(format!("parsing the upload failed: {e}")))??;
+    let (clips, _reservation) = tokio::task::spawn_blocking(move || {
+        let clips = parse_upload(files, &limits, &mut reservation);
+        (clips, reservation)
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("parsing the upload failed: {e}")))?;
+    let clips = clips?;
     let dataset_id = Uuid::new_v4();
     let name = name.unwrap_or(default_name);
+    let bytes: usize = clips
+        .iter()
+        .map(|c| c.source.len() + c.skeleton.as_ref().map_or(0, Vec::len))
+        .sum();
     let mut tx = state.db.begin().await?;
+    quota::lock_tenant(&mut tx, tenant.id).await?;
+    let usage = quota::usage(&mut *tx, tenant.id).await?;
+    quota::check_stored(&state.config.quotas, &usage, bytes.max(1) as u64)?;
     sqlx::query("INSERT INTO datasets (id, tenant_id, name) VALUES ($1, $2, $3)")
         .bind(dataset_id)
         .bind(tenant.id)

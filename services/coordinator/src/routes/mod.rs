@@ -17,6 +17,7 @@ pub mod augmentations;
 pub mod datasets;
 pub mod docs;
 pub mod health;
+pub mod limits;
 pub mod viewer;
 pub mod worker;
 
@@ -47,6 +48,7 @@ pub fn router(limits: &Limits) -> OpenApiRouter<AppState> {
         .routes(routes!(viewer::redirect))
         .routes(routes!(viewer::info))
         .routes(routes!(viewer::asset))
+        .routes(routes!(limits::get))
         // Internal worker API (worker token).
         .routes(routes!(worker::claim))
         .routes(routes!(worker::heartbeat))

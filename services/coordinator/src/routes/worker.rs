@@ -2,8 +2,8 @@
 //!
 //! Workers hold no database credentials; everything they do goes through here.
 //! Every report carries the job's epoch (lease token): 409 means the lease is no
-//! longer the worker's, 410 that the job was cancelled. Either way the worker
-//! drops the job.
+//! longer the worker's, 410 that the job was cancelled or no longer exists (its
+//! dataset was deleted). Either way the worker drops the job.
 
 use std::time::{Duration, Instant};
 
@@ -37,12 +37,19 @@ pub struct EpochQuery {
     pub epoch: i64,
 }
 
-fn refused(state: &AppState, lease: &Lease) -> ApiError {
+fn refused(state: &AppState, id: Uuid, lease: &Lease) -> ApiError {
     match lease {
         Lease::Cancelled => ApiError::new(
             StatusCode::GONE,
             "Cancelled",
             "the job was cancelled; drop it",
+        ),
+        Lease::Missing => ApiError::new(
+            StatusCode::GONE,
+            "Gone",
+            format!(
+                "there is no job {id}: it was deleted with its dataset, or never existed; drop it"
+            ),
         ),
         _ => {
             state.metrics.stale_reports.inc();
@@ -51,14 +58,14 @@ fn refused(state: &AppState, lease: &Lease) -> ApiError {
     }
 }
 
-fn accept(state: &AppState, lease: Lease) -> Result<(Uuid, String), ApiError> {
+fn accept(state: &AppState, id: Uuid, lease: Lease) -> Result<(Uuid, String), ApiError> {
     match lease {
         Lease::Current {
             augmentation_id,
             kind,
             ..
         } => Ok((augmentation_id, kind)),
-        other => Err(refused(state, &other)),
+        other => Err(refused(state, id, &other)),
     }
 }
 
@@ -169,6 +176,7 @@ pub async fn claim(
         (status = 200, description = "ok", body = wire::HeartbeatReply),
         (status = 401, response = Problem),
         (status = 409, response = Problem),
+        (status = 410, response = Problem),
     )
 )]
 pub async fn heartbeat(
@@ -198,7 +206,7 @@ pub async fn heartbeat(
             Ok(Json(HeartbeatReply { cancelled: false }))
         }
         Lease::Cancelled => Ok(Json(HeartbeatReply { cancelled: true })),
-        Lease::Stale => Err(refused(&state, &lease)),
+        Lease::Stale | Lease::Missing => Err(refused(&state, id, &lease)),
     }
 }
 
@@ -262,7 +270,7 @@ pub async fn put_artifact(
             sqlx::Error::Protocol(m) => ApiError::conflict(m),
             other => ApiError::from(other),
         })?;
-    accept(&state, lease)?;
+    accept(&state, id, lease)?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -290,7 +298,7 @@ pub async fn put_checkpoint(
     body: Bytes,
 ) -> Result<StatusCode, ApiError> {
     let lease = queue::put_checkpoint(&state.db, id, q.epoch, &body).await?;
-    accept(&state, lease)?;
+    accept(&state, id, lease)?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -317,7 +325,7 @@ pub async fn get_checkpoint(
     Query(q): Query<EpochQuery>,
 ) -> Result<Response, ApiError> {
     let (lease, checkpoint) = queue::get_checkpoint(&state.db, id, q.epoch).await?;
-    accept(&state, lease)?;
+    accept(&state, id, lease)?;
     match checkpoint {
         Some(bytes) => Ok(bytes.into_response()),
         None => Err(ApiError::not_found("checkpoint")),
@@ -375,7 +383,7 @@ pub async fn complete(
             Ok(StatusCode::NO_CONTENT)
         }
         Completion::Accepted(_) | Completion::Duplicate => Ok(StatusCode::NO_CONTENT),
-        Completion::Refused(lease) => Err(refused(&state, &lease)),
+        Completion::Refused(lease) => Err(refused(&state, id, &lease)),
         Completion::MissingFiles(missing) => Err(ApiError::unprocessable(format!(
             "the output lists files that were not uploaded: {}",
             missing.join(", ")
@@ -457,7 +465,7 @@ pub async fn fail(
         state.config.queue.retry_base,
     )
     .await?;
-    let (augmentation_id, kind) = accept(&state, lease)?;
+    let (augmentation_id, kind) = accept(&state, id, lease)?;
     tracing::warn!(job = %id, %kind, error = %error, new_state = ?new_state.map(JobState::as_str), "job attempt failed");
     state
         .metrics
@@ -499,7 +507,7 @@ pub async fn release(
     Json(request): Json<ReleaseRequest>,
 ) -> Result<StatusCode, ApiError> {
     let lease = queue::release(&state.db, id, request.epoch).await?;
-    let (augmentation_id, kind) = accept(&state, lease)?;
+    let (augmentation_id, kind) = accept(&state, id, lease)?;
     tracing::info!(job = %id, "job released by its worker");
     state
         .events
@@ -541,7 +549,7 @@ pub async fn get_input(
     Query(q): Query<EpochQuery>,
 ) -> Result<Response, ApiError> {
     let (lease, content) = queue::get_input(&state.db, id, q.epoch, &name).await?;
-    accept(&state, lease)?;
+    accept(&state, id, lease)?;
     match content {
         Some(bytes) => Ok(bytes.into_response()),
         None => Err(ApiError::not_found("input")),

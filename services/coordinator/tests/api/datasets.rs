@@ -93,7 +93,10 @@ async fn bad_files_reject_the_whole_upload_and_name_the_problem() {
     assert!(body["detail"].as_str().unwrap().contains("notes.txt"));
 
     let r = app
-        .upload(&app.key, &[("a.bvh", bvh(5)), ("x/a.bvh", bvh(5))])
+        .upload(
+            &app.key,
+            &[("a.bvh", bvh(5)), ("d.zip", zip_of(&[("x/a.bvh", bvh(5))]))],
+        )
         .await;
     let (status, body) = problem(r).await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
@@ -302,5 +305,61 @@ async fn tenants_never_see_each_other() {
     // Still there and untouched for its owner.
     assert_eq!(app.status(aug).await["status"], "queued");
     assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
+
+/// File names that are not bare file names, zip entries that point outside
+/// the zip and stems that cannot name a clip (`...bvh` would be a clip `..`)
+/// are refused with 422 naming them; nothing is cut down or stored.
+#[tokio::test]
+async fn unsafe_names_are_refused_naming_them() {
+    let app = spawn_app(&[]).await;
+    let names = [
+        "...bvh",
+        ".bvh",
+        "../../etc/x.bvh",
+        "/etc/abs.bvh",
+        "..\\..\\evil.bvh",
+        "my walk.bvh",
+    ];
+    for name in names {
+        // Sent as curl sends it: the name as given, not percent-encoded.
+        let form = Form::new()
+            .part("file", Part::bytes(bvh(20)).file_name(name))
+            .percent_encode_noop();
+        let r = app
+            .http
+            .post(app.url("/v1/datasets"))
+            .bearer_auth(&app.key)
+            .multipart(form)
+            .send()
+            .await
+            .unwrap();
+        let (status, body) = problem(r).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{name}: {body}");
+        // Named as sent, never cut to a stem (reqwest escapes `\` in the
+        // quoted file name as `\\`, which the server reads literally).
+        let file = body["file"].as_str().unwrap();
+        assert!(
+            file == name || file == name.replace('\\', "\\\\"),
+            "{name}: {body}"
+        );
+        assert!(body["detail"].as_str().unwrap().contains(file), "{body}");
+    }
+    for entry in ["../../escape.bvh", "/abs.bvh", "dir/../../up.bvh"] {
+        let zip = zip_of(&[("ok.bvh", bvh(20)), (entry, bvh(20))]);
+        let r = app.upload(&app.key, &[("data.zip", zip)]).await;
+        let (status, body) = problem(r).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{entry}: {body}");
+        assert_eq!(body["file"], format!("data.zip/{entry}"), "{body}");
+        assert!(body["detail"].as_str().unwrap().contains(entry), "{body}");
+    }
+    assert_eq!(app.dataset_count().await, 0);
+    // Folders inside a zip are fine, and every stored name is a clip name.
+    let zip = zip_of(&[("takes/run-1.v2.bvh", bvh(20))]);
+    let r = app.upload(&app.key, &[("data.zip", zip)]).await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["clips"][0]["name"], "run-1.v2");
     app.cleanup().await;
 }

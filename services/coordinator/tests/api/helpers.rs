@@ -34,7 +34,7 @@ pub struct TestApp {
 }
 
 /// Drops the test database from a separate thread.
-fn drop_database(name: &str) {
+pub fn drop_database(name: &str) {
     let name = name.to_string();
     let _ = std::thread::spawn(move || {
         let runtime = tokio::runtime::Builder::new_current_thread()
@@ -63,7 +63,8 @@ impl Drop for TestApp {
     }
 }
 
-pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
+/// A new empty database: its name and URL (drop it with [`drop_database`]).
+pub async fn create_database() -> (String, String) {
     let db_name = format!("test_{}", Uuid::new_v4().simple());
     let mut admin = PgConnection::connect(ADMIN_URL)
         .await
@@ -73,6 +74,11 @@ pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
         .await
         .unwrap();
     let database_url = format!("postgres://postgres@127.0.0.1:5432/{db_name}");
+    (db_name, database_url)
+}
+
+pub async fn spawn_app(overrides: &[(&str, &str)]) -> TestApp {
+    let (db_name, database_url) = create_database().await;
     let mut env: HashMap<String, String> = [
         ("DATABASE_URL", database_url.as_str()),
         ("REDIS_URL", "redis://127.0.0.1:6379/0"),
@@ -288,4 +294,80 @@ pub async fn upload_one(app: &TestApp) -> (String, Value) {
     assert_eq!(r.status(), StatusCode::CREATED);
     let body: Value = r.json().await.unwrap();
     (body["id"].as_str().unwrap().to_string(), body)
+}
+
+/// A real `motionaug-coordinator` process (the binary, not the library in this
+/// process) on a fresh database and a free port, with a tenant key: for
+/// measurements of the process itself (memory, latency under load).
+pub struct RealCoordinator {
+    child: std::process::Child,
+    pub base: String,
+    pub key: String,
+    db_name: String,
+}
+
+impl RealCoordinator {
+    /// Starts it with `env` on top of the required settings (the default
+    /// limits otherwise) and waits until it answers.
+    pub async fn start(env: &[(&str, &str)]) -> RealCoordinator {
+        let binary = env!("CARGO_BIN_EXE_motionaug-coordinator");
+        let (db_name, database_url) = create_database().await;
+        let key = std::process::Command::new(binary)
+            .args(["create-key", "--tenant", "measured"])
+            .env("DATABASE_URL", &database_url)
+            .output()
+            .unwrap();
+        assert!(key.status.success(), "{key:?}");
+        let key = String::from_utf8(key.stdout).unwrap().trim().to_string();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let child = std::process::Command::new(binary)
+            .env("DATABASE_URL", &database_url)
+            .env("MOTIONAUG_LISTEN", format!("127.0.0.1:{port}"))
+            .env("MOTIONAUG_WORKER_TOKEN", WORKER_TOKEN)
+            .env("RUST_LOG", "warn")
+            .envs(env.iter().copied())
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let server = RealCoordinator {
+            child,
+            base: format!("http://127.0.0.1:{port}"),
+            key,
+            db_name,
+        };
+        let http = reqwest::Client::new();
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while http
+            .get(format!("{}/healthz", server.base))
+            .send()
+            .await
+            .is_err()
+        {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "coordinator did not start"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        server
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Kills the process and drops its database.
+    pub fn stop(self) {}
+}
+
+impl Drop for RealCoordinator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        drop_database(&self.db_name);
+    }
 }

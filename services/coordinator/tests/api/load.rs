@@ -98,3 +98,158 @@ async fn load_test() {
         Err(_) => panic!("app still shared"),
     }
 }
+
+/// Status polls at a fixed rate for `seconds`, open loop: request `i` is due
+/// at `i / rate` whatever the earlier ones did, and its latency counts from
+/// when it was due (so a server that falls behind shows it, instead of the
+/// client slowing down with it). Returns (p50, p99, max) in ms and failures.
+async fn fixed_rate(
+    http: &reqwest::Client,
+    url: &str,
+    key: &str,
+    rate: f64,
+    seconds: f64,
+) -> (f64, f64, f64, usize) {
+    let n = (rate * seconds) as usize;
+    let started = tokio::time::Instant::now();
+    let mut tasks = tokio::task::JoinSet::new();
+    for i in 0..n {
+        let due = started + Duration::from_secs_f64(i as f64 / rate);
+        tokio::time::sleep_until(due).await;
+        let request = http.get(url).bearer_auth(key).send();
+        tasks.spawn(async move {
+            let ok = matches!(request.await, Ok(r) if r.status() == StatusCode::OK);
+            (ok, due.elapsed())
+        });
+    }
+    let mut latencies = Vec::with_capacity(n);
+    let mut failed = 0;
+    while let Some(r) = tasks.join_next().await {
+        let (ok, latency) = r.unwrap();
+        failed += usize::from(!ok);
+        latencies.push(latency);
+    }
+    latencies.sort();
+    (
+        percentile(&latencies, 0.50),
+        percentile(&latencies, 0.99),
+        percentile(&latencies, 1.0),
+        failed,
+    )
+}
+
+/// Load benchmark of the status read (`GET /v1/augmentations/{id}`) against a
+/// real coordinator process (the release binary, default settings): p50 / p99
+/// at fixed rates of 200 and 1000 req/s (open loop, 10 s each after a 2 s
+/// warm-up), then the most it serves with 64 requests in flight. The
+/// augmentation is a noise x 3 + mirror recipe over 50 clips (with
+/// `[correct]`: 250 jobs), so a read that aggregated its jobs would show.
+/// Run by hand:
+/// `cargo test --release -p motionaug-coordinator --test api -- --ignored status_polling --nocapture`
+/// (STATUS_RATES="200,1000", STATUS_SECONDS=10 change it).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "load benchmark: run by hand"]
+async fn status_polling_benchmark() {
+    let rates: Vec<f64> = std::env::var("STATUS_RATES")
+        .unwrap_or_else(|_| "200,1000".into())
+        .split(',')
+        .filter_map(|r| r.trim().parse().ok())
+        .collect();
+    let seconds: f64 = std::env::var("STATUS_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(10.0);
+    let server = RealCoordinator::start(&[("MOTIONAUG_MAX_FILES", "100")]).await;
+    let http = reqwest::Client::builder()
+        .pool_max_idle_per_host(256)
+        .build()
+        .unwrap();
+    let clip = bvh(60);
+    let mut form = Form::new();
+    for i in 0..50 {
+        form = form.part(
+            "file",
+            Part::bytes(clip.clone()).file_name(format!("c{i}.bvh")),
+        );
+    }
+    let r = http
+        .post(format!("{}/v1/datasets", server.base))
+        .bearer_auth(&server.key)
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let dataset: Value = r.json().await.unwrap();
+    let recipe = json!({"ops": [{"op": "noise", "copies": 3}, {"op": "mirror"}],
+                        "correct": {"time_budget_s": 1, "warm_start": false}});
+    let r = http
+        .post(format!(
+            "{}/v1/datasets/{}/augmentations",
+            server.base,
+            dataset["id"].as_str().unwrap()
+        ))
+        .bearer_auth(&server.key)
+        .json(&recipe)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::ACCEPTED);
+    let aug: Value = r.json().await.unwrap();
+    let url = format!(
+        "{}/v1/augmentations/{}",
+        server.base,
+        aug["id"].as_str().unwrap()
+    );
+    let status: Value = http
+        .get(&url)
+        .bearer_auth(&server.key)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let jobs = status["jobs"]["total"].as_i64().unwrap();
+
+    fixed_rate(&http, &url, &server.key, 200.0, 2.0).await;
+    for rate in rates {
+        let (p50, p99, max, failed) = fixed_rate(&http, &url, &server.key, rate, seconds).await;
+        println!(
+            "status poll ({jobs} jobs), {rate:.0} req/s for {seconds:.0} s (open loop): \
+             p50 {p50:.2} ms, p99 {p99:.2} ms, max {max:.1} ms, {failed} failed"
+        );
+        assert_eq!(failed, 0);
+    }
+    // Closed loop: 64 requests in flight for `seconds`.
+    let started = std::time::Instant::now();
+    let deadline = started + Duration::from_secs_f64(seconds);
+    let mut tasks = tokio::task::JoinSet::new();
+    for _ in 0..64 {
+        let (http, url, key) = (http.clone(), url.clone(), server.key.clone());
+        tasks.spawn(async move {
+            let mut latencies = Vec::new();
+            while std::time::Instant::now() < deadline {
+                let t = std::time::Instant::now();
+                let r = http.get(&url).bearer_auth(&key).send().await.unwrap();
+                assert_eq!(r.status(), StatusCode::OK);
+                r.bytes().await.unwrap();
+                latencies.push(t.elapsed());
+            }
+            latencies
+        });
+    }
+    let mut latencies = Vec::new();
+    while let Some(r) = tasks.join_next().await {
+        latencies.extend(r.unwrap());
+    }
+    latencies.sort();
+    println!(
+        "status poll ({jobs} jobs), 64 in flight for {seconds:.0} s (closed loop): {:.0} req/s, \
+         p50 {:.2} ms, p99 {:.2} ms",
+        latencies.len() as f64 / started.elapsed().as_secs_f64(),
+        percentile(&latencies, 0.50),
+        percentile(&latencies, 0.99)
+    );
+    server.stop();
+}

@@ -9,10 +9,14 @@
 //! crate's end-to-end test.
 
 mod augmentations;
+mod cli;
 mod datasets;
+mod errors;
 mod health;
 mod helpers;
 mod jobs;
+mod limits;
 mod load;
+mod memory;
 mod openapi;
 mod viewer;
