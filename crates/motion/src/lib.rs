@@ -26,8 +26,8 @@ pub mod units;
 
 pub use error::{MotionError, ParseError};
 pub use io::{LoadOptions, load, save};
-pub use motion::Motion;
-pub use skeleton::{Axis, Channel, Joint, JointLimits, Skeleton, Transform};
+pub use motion::{Motion, Tracks};
+pub use skeleton::{Axis, BaseJoint, Channel, Joint, JointLimits, Skeleton, Transform};
 pub use units::Unit;
 
 /// Re-exported so downstream crates use the same maths types.
