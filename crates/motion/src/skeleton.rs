@@ -161,7 +161,8 @@ impl Skeleton {
 
     /// The same skeleton with `base` above its root (outermost first): the
     /// names must be new and non-empty, the values finite; rotations are
-    /// normalised.
+    /// normalised (left as they are when already unit to 1e-12, so a base
+    /// read back from JSON is the base written).
     pub fn with_base(mut self, mut base: Vec<BaseJoint>) -> Result<Self, MotionError> {
         let bad = |m: String| Err(MotionError::InvalidSkeleton(m));
         for (i, b) in base.iter_mut().enumerate() {
@@ -175,7 +176,9 @@ impl Skeleton {
             if !finite || !(n.is_finite() && n > 1e-9) {
                 return bad(format!("base joint `{}` has a non-finite value", b.name));
             }
-            b.rotation /= n;
+            if (n - 1.0).abs() > 1e-12 {
+                b.rotation /= n;
+            }
         }
         for (i, b) in base.iter().enumerate() {
             let twice = base[..i].iter().any(|o| o.name == b.name);

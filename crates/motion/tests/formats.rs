@@ -422,6 +422,120 @@ proptest! {
     }
 }
 
+// --- NPZ in: the archives the product writes read back as clips ---
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 100, ..ProptestConfig::default() })]
+
+    #[test]
+    fn npz_clips_read_back((case, spec) in case_with_tracks(), folded in any::<bool>()) {
+        let m = if folded && case.joints.len() >= 2 {
+            // Through BVH, so the static root is folded into a base.
+            let s = static_root(&case, &spec);
+            bvh::parse(&bvh::to_bytes(&s), "s.bvh", case.unit).unwrap()
+        } else {
+            with_tracks(build(&case, true), &spec)
+        };
+        // Lossless: the same clip, bit for bit.
+        let exact = motion::npz::exact_to_bytes(&m, &[]).unwrap();
+        let back = motion::npz::read_motion(&exact, "exact.npz").unwrap();
+        prop_assert_eq!(&back, &m);
+        // float32: the same joints and motion to float precision.
+        let f32s = motion::npz::motion_to_bytes(&m, &[]).unwrap();
+        let back = motion::npz::read_motion(&f32s, "f32.npz").unwrap();
+        prop_assert_eq!(back.joints(), m.joints());
+        prop_assert_eq!(back.fps(), m.fps());
+        prop_assert_eq!(back.has_tracks(), m.has_tracks());
+        let err = max_position_error(&m, &back);
+        prop_assert!(err < 1e-4, "error {err} m");
+    }
+
+    #[test]
+    fn npz_clip_reader_never_panics(
+        (case, spec) in case_with_tracks(),
+        edits in prop::collection::vec((any::<usize>(), any::<u8>(), 0u8..4), 1..4),
+        which in 0u8..2,
+    ) {
+        let m = with_tracks(build(&case, false), &spec);
+        let mut bytes = if which == 0 {
+            motion::npz::exact_to_bytes(&m, &[]).unwrap()
+        } else {
+            motion::npz::motion_to_bytes(&m, &[]).unwrap()
+        };
+        mutate(&mut bytes, &edits);
+        let _ = motion::npz::read_motion(&bytes, "fuzz.npz");
+    }
+}
+
+#[test]
+fn npz_clips_that_cannot_be_read_are_named() {
+    use motion::npz::{NpzWriter, read_motion};
+    let walk = motion::load(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../examples/data/16_11_walk_veer_left.bvh"),
+        &Default::default(),
+    )
+    .unwrap();
+    let err = |bytes: &[u8]| read_motion(bytes, "in/clip.npz").unwrap_err().to_string();
+    let e = err(b"not a zip");
+    assert!(
+        e.starts_with("in/clip.npz: not a readable NPZ archive"),
+        "{e}"
+    );
+    // An archive of other arrays.
+    let other = NpzWriter::new(std::io::Cursor::new(Vec::new()))
+        .array_f32("x", &[1], &[1.0])
+        .unwrap()
+        .finish()
+        .unwrap()
+        .into_inner();
+    let e = err(&other);
+    assert!(
+        e.contains("in/clip.npz") && e.contains("no array `rotations`"),
+        "{e}"
+    );
+    // A non-finite root position, a wrong shape.
+    let arrays = motion::npz::read(&motion::npz::motion_to_bytes(&walk, &[]).unwrap()).unwrap();
+    let rebuilt = |change: &dyn Fn(&mut motion::npz::NpyArray)| {
+        let mut w = NpzWriter::new(std::io::Cursor::new(Vec::new()));
+        for a in &arrays {
+            let mut a = a.clone();
+            change(&mut a);
+            w = w.array(&a).unwrap();
+        }
+        w.finish().unwrap().into_inner()
+    };
+    let nan = rebuilt(&|a| {
+        if a.name == "root_translation" {
+            a.data[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
+        }
+    });
+    let e = err(&nan);
+    assert!(
+        e.contains("in/clip.npz") && e.contains("frame 1: root position is not finite"),
+        "{e}"
+    );
+    let shape = rebuilt(&|a| {
+        if a.name == "offsets" {
+            a.shape = vec![a.shape[0] * 3];
+        }
+    });
+    let e = err(&shape);
+    assert!(e.contains("array `offsets` has shape"), "{e}");
+    // Extras such as a mask do not get in the way.
+    let mask = motion::npz::NpyArray::bool(
+        "mask",
+        &[walk.frames(), walk.joints()],
+        &vec![true; walk.frames() * walk.joints()],
+    )
+    .unwrap();
+    let with_mask = motion::npz::motion_to_bytes(&walk, &[mask]).unwrap();
+    assert_eq!(
+        read_motion(&with_mask, "m.npz").unwrap().frames(),
+        walk.frames()
+    );
+}
+
 /// Apply byte edits: replace, delete, insert or truncate at a position.
 fn mutate(text: &mut Vec<u8>, edits: &[(usize, u8, u8)]) {
     for &(pos, byte, kind) in edits {

@@ -104,9 +104,16 @@ fn the_example_is_the_walk_in_the_static_root_layout() {
         std::fs::write(&path, &derived).unwrap();
     }
     let committed = std::fs::read_to_string(&path).unwrap();
-    assert!(committed == derived, "{} is not the rewritten walk", path.display());
+    assert!(
+        committed == derived,
+        "{} is not the rewritten walk",
+        path.display()
+    );
     // Every joint has six channels; Hips' positions vary, the others' do not.
-    let channels: Vec<&str> = committed.lines().filter(|l| l.contains("CHANNELS")).collect();
+    let channels: Vec<&str> = committed
+        .lines()
+        .filter(|l| l.contains("CHANNELS"))
+        .collect();
     assert_eq!(channels.len(), 32);
     assert!(channels.iter().all(|l| l.contains("CHANNELS 6 ")));
 }
@@ -123,7 +130,10 @@ fn the_static_root_layout_reads_as_the_walk() {
     assert_eq!(m.skeleton().base()[0].name, "joint_Root");
     assert!(!m.has_tracks());
     assert_eq!((m.frames(), m.fps()), (KEPT, 60.0));
-    assert_eq!(m.skeleton().source_unit_m(), original.skeleton().source_unit_m());
+    assert_eq!(
+        m.skeleton().source_unit_m(),
+        original.skeleton().source_unit_m()
+    );
     // Every joint where the walk has it, frame for frame.
     let mut worst: f64 = 0.0;
     for f in 0..m.frames() {
