@@ -20,6 +20,7 @@
 //! | `parents` | int32 | `[J]` | parent joint index, -1 for the root |
 //! | `offsets` | float32 | `[J, 3]` | rest offsets from the parent, metres |
 //! | `joint_names` | `<U..` | `[J]` | joint names |
+//! | `end_sites` | float32 | `[J, 3]` | tip of each leaf joint from the joint, metres, in its frame (NaN for joints without one) |
 //! | `fps` | float64 | `[]` | frames per second |
 //! | `translations` | float32 | `[T, J, 3]` | only for clips with translation tracks: each joint's local translation (its rest offset where it has no track; the root: its world position) |
 //!
@@ -32,8 +33,9 @@
 //! deflated ones, for the dtypes above); [`read_motion`] reads a clip from
 //! either kind of archive the product writes, so outputs can be fed back in.
 //! From the float32 kind the skeleton has what the archive holds (names,
-//! parents, offsets; no end sites, source channels or static base, lengths in
-//! metres); other arrays (an occlusion `mask`) are not part of the clip.
+//! parents, offsets, end sites; not the source file's channel layout or static
+//! base; lengths in metres); other arrays (an occlusion `mask`) are not part
+//! of the clip.
 
 use std::io::{Cursor, Read, Seek, Write};
 use std::path::Path;
@@ -419,6 +421,14 @@ pub fn add_motion<W: Write + Seek>(
         .iter()
         .map(|jt| jt.name.as_str())
         .collect();
+    let end_sites: Vec<f32> = skeleton
+        .joints()
+        .iter()
+        .flat_map(|jt| {
+            jt.end_site
+                .map_or([f32::NAN; 3], |e| [e.x as f32, e.y as f32, e.z as f32])
+        })
+        .collect();
     let writer = writer
         .array_f32("positions", &[t, j, 3], &positions)?
         .array_f32("rotations", &[t, j, 4], &rotations)?
@@ -426,6 +436,7 @@ pub fn add_motion<W: Write + Seek>(
         .array_i32("parents", &[j], &parents)?
         .array_f32("offsets", &[j, 3], &offsets)?
         .array_str("joint_names", &[j], &names)?
+        .array_f32("end_sites", &[j, 3], &end_sites)?
         .scalar_f64("fps", motion.fps())?;
     if !motion.has_tracks() {
         return Ok(writer);
@@ -626,6 +637,11 @@ fn skeleton_from_arrays<'a>(
         .to_i32()
         .ok_or_else(|| invalid("array `parents` is not int32".into()))?;
     let offsets = floats("offsets", &[j, 3])?;
+    // End sites came later: an archive without them has none.
+    let end_sites = match need("end_sites") {
+        Ok(_) => floats("end_sites", &[j, 3])?,
+        Err(_) => vec![f64::NAN; 3 * j],
+    };
     if names.len() != j || parents.len() != j {
         return Err(invalid(format!(
             "{} joint names and {} parents for {j} joints",
@@ -645,7 +661,8 @@ fn skeleton_from_arrays<'a>(
                 parent,
                 offset: DVec3::new(offsets[3 * k], offsets[3 * k + 1], offsets[3 * k + 2]),
                 channels: Vec::new(),
-                end_site: None,
+                end_site: Some(DVec3::from_slice(&end_sites[3 * k..3 * k + 3]))
+                    .filter(|e| !e.is_nan()),
                 limits: None,
             })
         })

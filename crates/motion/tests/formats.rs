@@ -446,6 +446,12 @@ proptest! {
         prop_assert_eq!(back.joints(), m.joints());
         prop_assert_eq!(back.fps(), m.fps());
         prop_assert_eq!(back.has_tracks(), m.has_tracks());
+        for (a, b) in back.skeleton().joints().iter().zip(m.skeleton().joints()) {
+            prop_assert_eq!(a.end_site.is_some(), b.end_site.is_some());
+            if let (Some(x), Some(y)) = (a.end_site, b.end_site) {
+                prop_assert!((x - y).length() < 1e-5);
+            }
+        }
         let err = max_position_error(&m, &back);
         prop_assert!(err < 1e-4, "error {err} m");
     }
@@ -674,6 +680,7 @@ fn npz_holds_the_motion_and_extras() {
     assert_eq!(a["root_translation"].shape, vec![t, 3]);
     assert_eq!(a["parents"].to_i32().unwrap(), vec![-1, 0, 1, 0]);
     assert_eq!(a["offsets"].shape, vec![j, 3]);
+    assert_eq!(a["end_sites"].shape, vec![j, 3]);
     assert_eq!(
         a["joint_names"].to_strings().unwrap(),
         vec!["root", "lfemur", "ltibia", "lowerback"]
