@@ -563,9 +563,7 @@ pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, M
                 .ok_or_else(|| bad("array `skeleton_json` is not uint8".into()))?;
             let s: Skeleton = serde_json::from_slice(&bytes)
                 .map_err(|e| bad(format!("array `skeleton_json`: {e}")))?;
-            Skeleton::new(s.joints().to_vec(), s.source_unit_m())
-                .and_then(|k| k.with_base(s.base().to_vec()))
-                .map_err(|e| bad(e.to_string()))?
+            s.validated().map_err(|e| bad(e.to_string()))?
         }
         None => skeleton_from_arrays(&need, &floats, j).map_err(|e| match e {
             MotionError::Parse(p) => MotionError::Parse(p),

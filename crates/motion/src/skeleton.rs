@@ -190,6 +190,17 @@ impl Skeleton {
         Ok(self)
     }
 
+    /// Validates a skeleton that did not come from [`Skeleton::new`] (serde
+    /// deserialisation bypasses it): the checks of `new` and `with_base`.
+    pub fn validated(self) -> Result<Self, MotionError> {
+        let Skeleton {
+            joints,
+            source_unit_m,
+            base,
+        } = self;
+        Skeleton::new(joints, source_unit_m)?.with_base(base)
+    }
+
     /// Static joints above the root, outermost first (see the module doc).
     pub fn base(&self) -> &[BaseJoint] {
         &self.base
