@@ -406,6 +406,15 @@ mod tests {
         assert!((a.translation - b.translation).length() < 1e-9);
         assert!(rotation::angle_between(a.rotation, b.rotation) < 1e-9);
         check(&back);
+        // The unit is guessed from the body, not from how far the static root is.
+        let far = STATIC_ROOT
+            .replace("OFFSET 0 90 0", "OFFSET 600 90 0")
+            .replace(" 0 90 0 0 0 0 0 -40", " 600 90 0 0 0 0 0 -40")
+            .replace(" 5 91 1 0 10 0", " 605 91 1 0 10 0")
+            .replace(" 10 92 2 5 10 0", " 610 92 2 5 10 0");
+        let m = parse(far.as_bytes(), "far.bvh", Unit::Auto).unwrap();
+        assert_eq!(m.skeleton().source_unit_m(), 0.01);
+        assert_eq!(m.skeleton().base().len(), 1);
     }
 
     #[test]

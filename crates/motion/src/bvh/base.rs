@@ -25,34 +25,40 @@ use crate::error::MotionError;
 use crate::motion::{Motion, Tracks};
 use crate::skeleton::{BaseJoint, Joint, Skeleton};
 
-/// The travelling joint and the static chain above it, if the layout has one.
-fn travelling_joint(motion: &Motion, still: &[bool]) -> Option<(usize, Vec<usize>)> {
-    let skeleton = motion.skeleton();
+/// The travelling joint and the static chain above it (outermost first), if
+/// the layout has one: `parents` of every joint, `still[j]` when joint `j`'s
+/// channels hold still, `tracked[j]` when it has a translation track.
+pub(super) fn static_chain(
+    parents: &[Option<usize>],
+    still: &[bool],
+    tracked: &[bool],
+) -> Option<(usize, Vec<usize>)> {
     let mut chain = Vec::new();
     let mut j = 0;
     loop {
         if !still[j] {
             return None;
         }
-        let mut kids = skeleton.children(j);
+        let mut kids = (0..parents.len()).filter(|&c| parents[c] == Some(j));
         let (Some(child), None) = (kids.next(), kids.next()) else {
             return None;
         };
         chain.push(j);
-        if motion.track(child).is_some() {
+        if tracked[child] {
             return Some((child, chain));
         }
         j = child;
     }
 }
 
-/// `motion` with the static joints above its travelling joint folded into the
-/// skeleton's base (see the module doc), or `motion` itself when the layout
-/// has no such joint. `still[j]`: joint `j`'s channels hold still.
-pub(super) fn fold_static_base(motion: Motion, still: &[bool]) -> Result<Motion, MotionError> {
-    let Some((travelling, chain)) = travelling_joint(&motion, still) else {
-        return Ok(motion);
-    };
+/// `motion` with the static joints `chain` above its travelling joint
+/// `travelling` ([`static_chain`]) folded into the skeleton's base (see the
+/// module doc).
+pub(super) fn fold_static_base(
+    motion: Motion,
+    travelling: usize,
+    chain: &[usize],
+) -> Result<Motion, MotionError> {
     let skeleton = motion.skeleton();
     let base: Vec<BaseJoint> = chain
         .iter()

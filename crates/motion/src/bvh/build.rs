@@ -31,7 +31,14 @@ pub(super) fn motion(
     let first_column = first_columns(raw);
     let still = still_joints(raw, values, &first_column);
     let (offsets, file_tracks) = translations(raw, values, &first_column);
-    let (skeleton, scale) = skeleton(raw, &offsets, unit, errors)?;
+    let parents: Vec<Option<usize>> = raw.iter().map(|j| j.parent).collect();
+    let tracked: Vec<bool> = file_tracks.iter().map(Option::is_some).collect();
+    let chain = base::static_chain(&parents, &still, &tracked);
+    // The body's size for the unit guess leaves the static joints out.
+    let body: Vec<bool> = (0..raw.len())
+        .map(|j| chain.as_ref().is_none_or(|(_, c)| !c.contains(&j)))
+        .collect();
+    let (skeleton, scale) = skeleton(raw, &offsets, &body, unit, errors)?;
     let (root_translation, rotations) = poses(raw, values, &first_column, &offsets, scale);
     let tracks: Tracks = file_tracks
         .into_iter()
@@ -41,7 +48,12 @@ pub(super) fn motion(
     let motion = Motion::new(skeleton, frame_rate, root_translation, rotations)
         .and_then(|m| m.with_tracks(tracks))
         .map_err(whole)?;
-    base::fold_static_base(motion, &still).map_err(whole)
+    match chain {
+        Some((travelling, chain)) => {
+            base::fold_static_base(motion, travelling, &chain).map_err(whole)
+        }
+        None => Ok(motion),
+    }
 }
 
 /// First column of each joint's channels.
@@ -135,10 +147,11 @@ fn translations(
 }
 
 /// The skeleton in metres and the metres per file unit: `unit`, or guessed
-/// from the rest pose in file units.
+/// from the rest pose in file units of the joints in `body`.
 fn skeleton(
     raw: &[RawJoint],
     offsets: &[DVec3],
+    body: &[bool],
     unit: Unit,
     errors: &Errors,
 ) -> Result<(Arc<Skeleton>, f64), ParseError> {
@@ -161,7 +174,7 @@ fn skeleton(
         Some(m) => m,
         None => {
             let in_file_units = file_skeleton(1.0).map_err(|e| errors.whole(e.to_string()))?;
-            units::guess_unit(units::rest_size(&in_file_units))
+            units::guess_unit(units::rest_size_of(&in_file_units, |j| body[j]))
                 .metres()
                 .unwrap_or(1.0)
         }
