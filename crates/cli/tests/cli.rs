@@ -234,6 +234,207 @@ fn bvh_examples_work_without_a_skeleton() {
     assert_eq!(v["fps"], 120.0);
 }
 
+/// The walk written with a static `joint_Root` above the travelling `Hips`
+/// and six channels on every joint (crates/motion/tests/static_root.rs).
+const STATIC_ROOT: &str = "examples/data/static_root_walk.bvh";
+
+/// Largest world distance between same-named joints (the base's included).
+fn named_error(a: &motion::Motion, b: &motion::Motion) -> f64 {
+    let positions = |m: &motion::Motion, f: usize| {
+        let s = m.skeleton();
+        let mut out: Vec<(String, motion::glam::DVec3)> = s
+            .base()
+            .iter()
+            .zip(s.base_transforms())
+            .map(|(j, t)| (j.name.clone(), t.translation))
+            .collect();
+        out.extend(
+            m.world_positions(f)
+                .into_iter()
+                .enumerate()
+                .map(|(j, p)| (s.joint(j).name.clone(), p)),
+        );
+        out
+    };
+    assert_eq!(a.frames(), b.frames());
+    let mut worst: f64 = 0.0;
+    for f in 0..a.frames() {
+        let (pa, pb) = (positions(a, f), positions(b, f));
+        assert_eq!(pa.len(), pb.len());
+        for (name, p) in pa {
+            let q = pb.iter().find(|(n, _)| *n == name).unwrap().1;
+            worst = worst.max((p - q).length());
+        }
+    }
+    worst
+}
+
+#[test]
+fn a_static_root_above_the_hips_inspects_converts_and_round_trips() {
+    let v: serde_json::Value =
+        serde_json::from_str(&ok(motionaug(&["inspect", STATIC_ROOT, "--json"]))).unwrap();
+    assert_eq!(v["joints"], 31);
+    assert_eq!(v["joint_names"][0], "Hips");
+    assert_eq!(v["base_joints"], serde_json::json!(["joint_Root"]));
+    assert_eq!(v["translation_tracks"], serde_json::json!([]));
+    let text = ok(motionaug(&["inspect", STATIC_ROOT]));
+    assert!(text.contains("static base: joint_Root"), "{text}");
+    // BVH -> BVH keeps the layout and every joint within a micrometre.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("walk.bvh");
+    ok(motionaug(&["convert", STATIC_ROOT, out.to_str().unwrap()]));
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(written.starts_with("HIERARCHY\nROOT joint_Root\n"));
+    assert_eq!(written.matches("CHANNELS 6 ").count(), 32);
+    let source = load(root().join(STATIC_ROOT), &LoadOptions::default()).unwrap();
+    let back = load(&out, &LoadOptions::default()).unwrap();
+    assert!(named_error(&source, &back) < 1e-6);
+    // Resampled too.
+    let slow = dir.path().join("walk30.npz");
+    ok(motionaug(&[
+        "convert",
+        STATIC_ROOT,
+        slow.to_str().unwrap(),
+        "--fps",
+        "30",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&ok(motionaug(&[
+        "inspect",
+        slow.to_str().unwrap(),
+        "--json",
+    ])))
+    .unwrap();
+    assert_eq!(
+        (v["frames"].as_u64(), v["fps"].as_f64()),
+        (Some(90), Some(30.0))
+    );
+}
+
+#[test]
+fn npz_outputs_feed_back_in() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    // The float32 NPZ motionaug writes, and the lossless one of the pipeline.
+    ok(motionaug(&["convert", STATIC_ROOT, &path("f32.npz")]));
+    let source = load(root().join(STATIC_ROOT), &LoadOptions::default()).unwrap();
+    std::fs::write(
+        path("exact.npz"),
+        pipeline::encode_clip(&source, None).unwrap(),
+    )
+    .unwrap();
+    let exact = load(path("exact.npz"), &LoadOptions::default()).unwrap();
+    assert_eq!(exact, source, "the lossless NPZ is the clip");
+    let f32s = load(path("f32.npz"), &LoadOptions::default()).unwrap();
+    assert_eq!(f32s.joints(), source.joints());
+    let mut worst: f64 = 0.0;
+    for f in 0..source.frames() {
+        for (p, q) in source
+            .world_positions(f)
+            .iter()
+            .zip(f32s.world_positions(f))
+        {
+            worst = worst.max((*p - q).length());
+        }
+    }
+    assert!(worst < 1e-5, "{worst} m");
+    for npz in ["f32.npz", "exact.npz"] {
+        let v: serde_json::Value =
+            serde_json::from_str(&ok(motionaug(&["inspect", &path(npz), "--json"]))).unwrap();
+        assert_eq!(v["frames"], 180, "{npz}");
+        ok(motionaug(&["metrics", &path(npz), "--json"]));
+        ok(motionaug(&[
+            "convert",
+            &path(npz),
+            &path(&npz.replace(".npz", ".bvh")),
+        ]));
+    }
+    // The exact one keeps the static base through BVH.
+    let bvh = std::fs::read_to_string(path("exact.bvh")).unwrap();
+    assert!(bvh.starts_with("HIERARCHY\nROOT joint_Root\n"));
+    // Both kinds, and augment's own outputs, go through augment.
+    let out = path("aug");
+    ok(motionaug(&[
+        "augment",
+        &path("f32.npz"),
+        &path("exact.npz"),
+        "--recipe",
+        "examples/recipes/kinematic.toml",
+        "--out",
+        &out,
+    ]));
+    let manifest: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(Path::new(&out).join("manifest.json")).unwrap())
+            .unwrap();
+    let recipe = synth::Recipe::from_toml_str(
+        &std::fs::read_to_string(root().join("examples/recipes/kinematic.toml")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(manifest.len(), 2 * recipe.outputs_per_clip());
+    let masked = manifest.iter().find(|e| e["op"] == "mask").unwrap()["file"]
+        .as_str()
+        .unwrap()
+        .replace(".bvh", ".npz");
+    let again = path("again");
+    ok(motionaug(&[
+        "augment",
+        Path::new(&out).join(&masked).to_str().unwrap(),
+        "--recipe",
+        "examples/recipes/basic.toml",
+        "--out",
+        &again,
+    ]));
+    // A file that is no clip is named.
+    std::fs::write(path("junk.npz"), b"PK not really").unwrap();
+    let err = failed(motionaug(&["inspect", &path("junk.npz")]));
+    assert!(err.contains("junk.npz") && err.contains("NPZ"), "{err}");
+}
+
+#[test]
+fn a_static_root_above_the_hips_augments_and_corrects() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("aug");
+    ok(motionaug(&[
+        "augment",
+        STATIC_ROOT,
+        "--recipe",
+        "examples/recipes/kinematic.toml",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let manifest: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    for entry in &manifest {
+        let file = out.join(entry["file"].as_str().unwrap());
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(
+            text.starts_with("HIERARCHY\nROOT joint_Root\n"),
+            "{}",
+            file.display()
+        );
+        let m = load(&file, &LoadOptions::default()).unwrap();
+        assert_eq!(m.skeleton().joint(0).name, "Hips");
+    }
+    // A short correction runs end to end and writes the file's layout back.
+    let corrected = dir.path().join("corrected");
+    ok(motionaug(&[
+        "correct",
+        STATIC_ROOT,
+        "--out",
+        corrected.to_str().unwrap(),
+        "--max-iterations",
+        "1",
+        "--envs",
+        "2",
+    ]));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(corrected.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["iterations"], 1);
+    let bvh = std::fs::read_to_string(corrected.join("corrected.bvh")).unwrap();
+    assert!(bvh.starts_with("HIERARCHY\nROOT joint_Root\n"));
+    let m = load(corrected.join("corrected.npz"), &LoadOptions::default()).unwrap();
+    assert_eq!(m.fps(), 30.0);
+}
+
 /// HDM05 clips of all five actors (not bundled; the eval tests skip without it).
 const HDM05: &str = "../shared/data/hdm05";
 

@@ -301,3 +301,49 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
         .is_err()
     );
 }
+
+/// The layout with a static root above the travelling Hips (six channels
+/// everywhere): the Hips drive the simulated pelvis, so the untrained tracker
+/// follows the clip as it does the same walk written with Hips as the root,
+/// and the corrected clip is written back in the file's layout.
+#[test]
+fn a_static_root_above_the_hips_corrects_like_the_plain_layout() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    let layered = load(data.join("static_root_walk.bvh"), &LoadOptions::default()).unwrap();
+    assert_eq!(layered.skeleton().base()[0].name, "joint_Root");
+    // The same walk without the base (every joint where it was).
+    let plain_skeleton = motion::Skeleton::new(
+        layered.skeleton().joints().to_vec(),
+        layered.skeleton().source_unit_m(),
+    )
+    .unwrap();
+    let plain = Motion::new(
+        std::sync::Arc::new(plain_skeleton),
+        layered.fps(),
+        layered.root_translation().to_vec(),
+        layered.rotations().to_vec(),
+    )
+    .unwrap();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let one = correct(&layered, "layered", &tiny(1), a.path(), false, |_| {}).unwrap();
+    let two = correct(&plain, "plain", &tiny(1), b.path(), false, |_| {}).unwrap();
+    assert_eq!(one.report.r_norm_action0, two.report.r_norm_action0);
+    assert_eq!(one.report.r_norm, two.report.r_norm);
+    let text = std::fs::read_to_string(a.path().join("corrected.bvh")).unwrap();
+    assert!(
+        text.starts_with("HIERARCHY\nROOT joint_Root\n"),
+        "{}",
+        &text[..80]
+    );
+    let back = load(a.path().join("corrected.bvh"), &LoadOptions::default()).unwrap();
+    assert_eq!(back.skeleton().joint(0).name, "Hips");
+    for t in 0..back.frames() {
+        for (p, q) in back
+            .world_positions(t)
+            .iter()
+            .zip(one.motion.world_positions(t))
+        {
+            assert!((*p - q).length() < 1e-5);
+        }
+    }
+}

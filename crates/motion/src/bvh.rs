@@ -16,12 +16,16 @@
 //!   in nearly every file, and the writer makes it 0 on axes with channels so
 //!   both readings agree); a root without position channels stays at its
 //!   `OFFSET`;
-//! * position channels on other joints are supported when they hold still: if
-//!   they repeat the joint's `OFFSET` at every frame (exporters that write six
-//!   channels everywhere, read by Blender as absolute translations) they are
-//!   taken as that offset, if they are constant otherwise they are added to it.
-//!   Animated (varying) non-root translations cannot be represented by
-//!   [`Motion`] and are an error naming the joint;
+//! * position channels on other joints are translations, read as absolute
+//!   (the joint's local translation, what Blender reads) when their values lie
+//!   closer to the `OFFSET` than to zero, else as added to the `OFFSET`
+//!   (module `translation` has the rule). Constant ones become the joint's offset;
+//!   varying ones become the joint's translation track in the [`Motion`],
+//!   which forward kinematics uses and the writer writes back;
+//! * a root that stands still above the joint carrying the body's travel (a
+//!   static `joint_Root` above a moving `Hips`) is folded into the skeleton's
+//!   base, so the motion's root is the travelling joint (module `base`; the writer
+//!   writes the static joints back above it);
 //! * any problem is a [`crate::ParseError`] naming the file, the line and what is
 //!   wrong; no input panics and nothing partial is returned.
 //!
@@ -43,10 +47,12 @@ use crate::skeleton::{Axis, Channel, Skeleton};
 use crate::text::{self, Errors};
 use crate::units::Unit;
 
+mod base;
 mod build;
 mod cursor;
 mod frames;
 mod hierarchy;
+mod translation;
 mod write;
 
 use cursor::Cursor;
@@ -130,6 +136,12 @@ pub fn write(motion: &Motion, out: &mut impl Write) -> std::io::Result<()> {
 ///   ignore it (Blender) agree. Position channels of other joints repeat the
 ///   joint's `OFFSET` (what Blender expects; [`parse`] reads that back as the
 ///   offset).
+/// * A joint with a translation track gets position channels on all three
+///   axes holding its local translation per frame; its `OFFSET` is its rest
+///   offset, unless the values would then read as relative ones (module
+///   `translation`). A skeleton's static base is written above the root,
+///   with its constant values in every frame, and the root's channels then
+///   hold its translation and rotation in the base's frame.
 /// * Angles in degrees, lengths in `unit`, 6 decimals: round trips keep world
 ///   joint positions to about 1e-6 m. Euler angles follow the previous frame's
 ///   branch, so curves have no 360-degree jumps.
@@ -138,11 +150,9 @@ pub fn write_in(motion: &Motion, unit: Unit, out: &mut impl Write) -> std::io::R
         Unit::Auto => default_unit(motion.skeleton()),
         u => u,
     };
-    let scale = 1.0 / unit.metres().unwrap_or(1.0);
-    let layout = write::layouts(motion);
-    let (children, order) = write::depth_first(motion.skeleton());
-    out.write_all(write::header(motion, &layout, &children, scale).as_bytes())?;
-    write::frames(motion, &layout, &order, scale, out)
+    let plan = write::Plan::new(motion, 1.0 / unit.metres().unwrap_or(1.0));
+    out.write_all(plan.header().as_bytes())?;
+    plan.frames(out)
 }
 
 /// The BVH text of `motion` in [`default_unit`].
@@ -302,10 +312,133 @@ mod tests {
             );
         let m = parse(abs.as_bytes(), "abs.bvh", Unit::Centimetres).unwrap();
         assert!((m.skeleton().joint(1).offset - DVec3::new(0.0, -0.4, 0.0)).length() < 1e-12);
-        // Varying: an error naming the joint's CHANNELS line.
+        assert!(!m.has_tracks());
+        // Zeros (relative to the offset) are the offset too.
+        let zeros = abs
+            .replace("0 0 0 0 -40 0 0", "0 0 0 0 0 0 0")
+            .replace("30 0 -40 0 90", "30 0 0 0 90");
+        let z = parse(zeros.as_bytes(), "zeros.bvh", Unit::Centimetres).unwrap();
+        assert_eq!(z.all_world_positions(), m.all_world_positions());
+        // Varying: a translation track, used by forward kinematics.
         let moving = abs.replace("30 0 -40 0 90", "30 0 -41 0 90");
-        let e = err(&moving);
-        assert_eq!(e.line, Some(9), "{e}");
-        assert!(e.message.contains("Leg"));
+        let m = parse(moving.as_bytes(), "moving.bvh", Unit::Centimetres).unwrap();
+        let track = m.track(1).unwrap();
+        assert!((track[1] - DVec3::new(0.0, -0.41, 0.0)).length() < 1e-12);
+        assert!((m.skeleton().joint(1).offset - DVec3::new(0.0, -0.4, 0.0)).length() < 1e-12);
+        let root = m.world_transforms(1)[0];
+        let leg = root.translation + root.rotation * DVec3::new(0.0, -0.41, 0.0);
+        assert!((m.world_positions(1)[1] - leg).length() < 1e-12);
+        // And comes back through the writer.
+        let back = parse(&to_bytes(&m), "back.bvh", Unit::Auto).unwrap();
+        assert_eq!(back.track(1).unwrap().len(), 2);
+        for f in 0..2 {
+            for (a, b) in m.world_positions(f).iter().zip(back.world_positions(f)) {
+                assert!((*a - b).length() < 1e-8);
+            }
+        }
+    }
+
+    /// A static root (rotated and moved) above a travelling `Hips`, six
+    /// channels on most joints, the exporters' layout of the issue.
+    const STATIC_ROOT: &str = "HIERARCHY\nROOT Base\n{\n\tOFFSET 10 0 5\n\
+        \tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+        \tJOINT Hips\n\t{\n\t\tOFFSET 0 90 0\n\
+        \t\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+        \t\tJOINT Leg\n\t\t{\n\t\t\tOFFSET 0 -40 0\n\
+        \t\t\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+        \t\t\tEnd Site\n\t\t\t{\n\t\t\t\tOFFSET 0 -40 0\n\t\t\t}\n\t\t}\n\
+        \t\tJOINT Spine\n\t\t{\n\t\t\tOFFSET 0 10 0\n\t\t\tCHANNELS 3 Zrotation Xrotation Yrotation\n\
+        \t\t\tEnd Site\n\t\t\t{\n\t\t\t\tOFFSET 0 50 0\n\t\t\t}\n\t\t}\n\t}\n}\n\
+        MOTION\nFrames: 3\nFrame Time: 0.0333333\n\
+        1 0 2 0 90 0 0 90 0 0 0 0 0 -40 0 10 0 0 0 0 0\n\
+        1 0 2 0 90 0 5 91 1 0 10 0 0 -40 0 20 0 0 0 0 5\n\
+        1 0 2 0 90 0 10 92 2 5 10 0 0 -40 0 30 0 0 0 0 10\n";
+
+    /// World positions (metres) of Base, Hips, Leg, Spine at frame `f` of
+    /// [`STATIC_ROOT`], by forward kinematics written out here.
+    fn static_root_expected(f: usize) -> [DVec3; 4] {
+        let zxy = [Axis::Z, Axis::X, Axis::Y];
+        let r = |deg: [f64; 3]| rotation::from_channels(&zxy, &deg.map(f64::to_radians));
+        let hips = [[0.0, 90.0, 0.0], [5.0, 91.0, 1.0], [10.0, 92.0, 2.0]];
+        let hips_rot = [[0.0, 0.0, 0.0], [0.0, 10.0, 0.0], [5.0, 10.0, 0.0]];
+        let base_p = DVec3::new(11.0, 0.0, 7.0);
+        let base_q = r([0.0, 90.0, 0.0]);
+        let hips_p = base_p + base_q * DVec3::from_array(hips[f]);
+        let hips_q = base_q * r(hips_rot[f]);
+        let leg = hips_p + hips_q * DVec3::new(0.0, -40.0, 0.0);
+        let spine = hips_p + hips_q * DVec3::new(0.0, 10.0, 0.0);
+        [base_p, hips_p, leg, spine].map(|p| p * 0.01)
+    }
+
+    #[test]
+    fn static_root_above_travelling_hips_is_folded() {
+        let m = parse(STATIC_ROOT.as_bytes(), "static.bvh", Unit::Centimetres).unwrap();
+        let names: Vec<&str> = m
+            .skeleton()
+            .joints()
+            .iter()
+            .map(|j| j.name.as_str())
+            .collect();
+        assert_eq!(names, ["Hips", "Leg", "Spine"]);
+        assert_eq!(m.skeleton().base().len(), 1);
+        assert_eq!(m.skeleton().base()[0].name, "Base");
+        assert!(!m.has_tracks(), "Leg's constant channels are its offset");
+        let check = |m: &Motion| {
+            for f in 0..3 {
+                let want = static_root_expected(f);
+                let base = m.skeleton().base_transforms()[0].translation;
+                assert!((base - want[0]).length() < 1e-9, "frame {f}");
+                for (got, want) in m.world_positions(f).iter().zip(&want[1..]) {
+                    assert!((*got - *want).length() < 1e-9, "frame {f}: {got} {want}");
+                }
+                assert!((m.root_translation()[f] - want[1]).length() < 1e-9);
+            }
+        };
+        check(&m);
+        // Written back with the static root above the Hips, and read the same.
+        let text = String::from_utf8(to_bytes(&m)).unwrap();
+        assert!(text.starts_with("HIERARCHY\nROOT Base\n"), "{text}");
+        assert!(text.contains("\tJOINT Hips\n"), "{text}");
+        let back = parse(text.as_bytes(), "back.bvh", Unit::Auto).unwrap();
+        // (The root's OFFSET is written 0 on axes with position channels.)
+        let (a, b) = (&back.skeleton().base()[0], &m.skeleton().base()[0]);
+        assert_eq!((&a.name, &a.channels), (&b.name, &b.channels));
+        assert!((a.translation - b.translation).length() < 1e-9);
+        assert!(rotation::angle_between(a.rotation, b.rotation) < 1e-9);
+        check(&back);
+        // The unit is guessed from the body, not from how far the static root is.
+        let far = STATIC_ROOT
+            .replace("OFFSET 0 90 0", "OFFSET 600 90 0")
+            .replace(" 0 90 0 0 0 0 0 -40", " 600 90 0 0 0 0 0 -40")
+            .replace(" 5 91 1 0 10 0", " 605 91 1 0 10 0")
+            .replace(" 10 92 2 5 10 0", " 610 92 2 5 10 0");
+        let m = parse(far.as_bytes(), "far.bvh", Unit::Auto).unwrap();
+        assert_eq!(m.skeleton().source_unit_m(), 0.01);
+        assert_eq!(m.skeleton().base().len(), 1);
+    }
+
+    #[test]
+    fn malformed_translation_channels_name_the_line() {
+        // Frames start on line 33: a NaN in Hips' Yposition of frame 2.
+        let nan = STATIC_ROOT.replace("5 91 1 0 10 0", "5 nan 1 0 10 0");
+        let e = err(&nan);
+        assert_eq!(e.line, Some(34), "{e}");
+        assert!(e.message.contains("not a finite number"), "{e}");
+        // A position value missing from frame 3.
+        let short = STATIC_ROOT.replace("10 92 2 5 10 0", "10 92 5 10 0");
+        let e = err(&short);
+        assert_eq!(e.line, Some(35), "{e}");
+        assert!(
+            e.message.contains("20 values") && e.message.contains("21 channels"),
+            "{e}"
+        );
+        // A CHANNELS count that does not match its names.
+        let count = STATIC_ROOT.replacen("CHANNELS 6 Xposition", "CHANNELS 7 Xposition", 2);
+        let e = err(&count);
+        assert_eq!(e.line, Some(6), "{e}");
+        assert!(
+            e.message.contains("JOINT") && e.message.contains("channel"),
+            "{e}"
+        );
     }
 }

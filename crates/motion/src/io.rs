@@ -5,6 +5,8 @@
 //! * `.bvh`: a BVH clip ([`crate::bvh`]), in `unit` (or guessed);
 //! * `.amc`: an AMC clip, which needs its ASF skeleton ([`crate::amc`]);
 //! * `.asf`: a skeleton alone, loaded as one frame of its rest pose;
+//! * `.npz`: a clip the product wrote, lossless or float32
+//!   ([`crate::npz::read_motion`]), so outputs can be fed back in;
 //! * saving: `.bvh` ([`crate::bvh::write_file`]) or `.npz`
 //!   ([`crate::npz::write_motion`]).
 //!
@@ -96,10 +98,7 @@ pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Motion, Mot
             )),
         },
         Some(Format::Asf) => asf::parse(&bytes, path)?.rest_motion(fps_or_default(options.fps)),
-        Some(Format::Npz) => Err(whole(
-            path,
-            "NPZ is an output format here; load the BVH or AMC it came from".into(),
-        )),
+        Some(Format::Npz) => npz::read_motion(&bytes, path),
         None => Err(unknown_extension(path)),
     }
 }
@@ -108,7 +107,7 @@ fn unknown_extension(path: &Path) -> MotionError {
     whole(
         path,
         format!(
-            "unknown file type `{}` (expected .bvh, .amc with an .asf skeleton, or .asf)",
+            "unknown file type `{}` (expected .bvh, .amc with an .asf skeleton, .asf or .npz)",
             path.extension()
                 .map(|e| format!(".{}", e.to_string_lossy()))
                 .unwrap_or_else(|| "(no extension)".into())
@@ -179,7 +178,7 @@ pub fn parse_named(
             )),
         },
         Some(Format::Asf) => asf::parse(bytes, path)?.rest_motion(fps_or_default(options.fps)),
-        Some(Format::Npz) => Err(whole(path, "NPZ is an output format here".into())),
+        Some(Format::Npz) => npz::read_motion(bytes, path),
         None => Err(unknown_extension(path)),
     }
 }

@@ -1,4 +1,5 @@
-//! NPZ archives (NumPy's `np.savez` format) for Python users.
+//! NPZ archives (NumPy's `np.savez` format) for Python users, and read back
+//! as clips.
 //!
 //! An `.npz` file is a zip archive of `.npy` files, one per array. The `.npy`
 //! format is a short text header (a Python dict literal with `descr`,
@@ -19,10 +20,22 @@
 //! | `parents` | int32 | `[J]` | parent joint index, -1 for the root |
 //! | `offsets` | float32 | `[J, 3]` | rest offsets from the parent, metres |
 //! | `joint_names` | `<U..` | `[J]` | joint names |
+//! | `end_sites` | float32 | `[J, 3]` | tip of each leaf joint from the joint, metres, in its frame (NaN for joints without one) |
 //! | `fps` | float64 | `[]` | frames per second |
+//! | `translations` | float32 | `[T, J, 3]` | only for clips with translation tracks: each joint's local translation (its rest offset where it has no track; the root: its world position) |
 //!
-//! [`read`] reads such archives back (our own and NumPy's uncompressed or
-//! deflated ones, for the dtypes above), for tests and for tools.
+//! [`exact_to_bytes`] writes the lossless form the pipeline hands clips on in
+//! (`root_translation`, `rotations` and `translations` in float64, `fps`, and
+//! the skeleton as JSON in `skeleton_json`, uint8: serde_json round-trips f64
+//! exactly with `float_roundtrip`, which the workspace enables).
+//!
+//! [`read`] reads any archive back (our own and NumPy's uncompressed or
+//! deflated ones, for the dtypes above); [`read_motion`] reads a clip from
+//! either kind of archive the product writes, so outputs can be fed back in.
+//! From the float32 kind the skeleton has what the archive holds (names,
+//! parents, offsets, end sites; not the source file's channel layout or static
+//! base; lengths in metres); other arrays (an occlusion `mask`) are not part
+//! of the clip.
 
 use std::io::{Cursor, Read, Seek, Write};
 use std::path::Path;
@@ -30,8 +43,11 @@ use std::path::Path;
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
 
-use crate::error::MotionError;
-use crate::motion::Motion;
+use glam::{DQuat, DVec3};
+
+use crate::error::{MotionError, ParseError};
+use crate::motion::{Motion, Tracks};
+use crate::skeleton::{Joint, Skeleton};
 
 /// Element type of an array.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -405,14 +421,42 @@ pub fn add_motion<W: Write + Seek>(
         .iter()
         .map(|jt| jt.name.as_str())
         .collect();
-    writer
+    let end_sites: Vec<f32> = skeleton
+        .joints()
+        .iter()
+        .flat_map(|jt| {
+            jt.end_site
+                .map_or([f32::NAN; 3], |e| [e.x as f32, e.y as f32, e.z as f32])
+        })
+        .collect();
+    let writer = writer
         .array_f32("positions", &[t, j, 3], &positions)?
         .array_f32("rotations", &[t, j, 4], &rotations)?
         .array_f32("root_translation", &[t, 3], &root)?
         .array_i32("parents", &[j], &parents)?
         .array_f32("offsets", &[j, 3], &offsets)?
         .array_str("joint_names", &[j], &names)?
-        .scalar_f64("fps", motion.fps())
+        .array_f32("end_sites", &[j, 3], &end_sites)?
+        .scalar_f64("fps", motion.fps())?;
+    if !motion.has_tracks() {
+        return Ok(writer);
+    }
+    let translations: Vec<f32> = translation_rows(motion)
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    writer.array_f32("translations", &[t, j, 3], &translations)
+}
+
+/// Every joint's local translation per frame, `[frame][joint]` (the root: its
+/// world position), as the `translations` arrays hold them.
+fn translation_rows(motion: &Motion) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity(motion.frames() * motion.joints());
+    for f in 0..motion.frames() {
+        out.push(motion.root_translation()[f]);
+        out.extend((1..motion.joints()).map(|j| motion.local_translation(f, j)));
+    }
+    out
 }
 
 /// The `.npz` bytes of `motion` plus `extras` (e.g. an occlusion mask).
@@ -437,6 +481,202 @@ pub fn write_motion(
     };
     let bytes = motion_to_bytes(motion, extras).map_err(io)?;
     std::fs::write(path, bytes).map_err(io)
+}
+
+/// The lossless `.npz` bytes of `motion` (see the module doc) plus `extras`.
+pub fn exact_to_bytes(motion: &Motion, extras: &[NpyArray]) -> std::io::Result<Vec<u8>> {
+    let (t, j) = (motion.frames(), motion.joints());
+    let root: Vec<f64> = motion
+        .root_translation()
+        .iter()
+        .flat_map(|p| [p.x, p.y, p.z])
+        .collect();
+    let rot: Vec<f64> = motion
+        .rotations()
+        .iter()
+        .flat_map(|q| [q.w, q.x, q.y, q.z])
+        .collect();
+    let skeleton = serde_json::to_vec(motion.skeleton().as_ref()).map_err(std::io::Error::other)?;
+    let mut w = NpzWriter::new(Cursor::new(Vec::new()))
+        .array_f64("root_translation", &[t, 3], &root)?
+        .array_f64("rotations", &[t, j, 4], &rot)?
+        .scalar_f64("fps", motion.fps())?
+        .array_u8("skeleton_json", &[skeleton.len()], &skeleton)?;
+    if motion.has_tracks() {
+        let rows: Vec<f64> = translation_rows(motion)
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
+        w = w.array_f64("translations", &[t, j, 3], &rows)?;
+    }
+    for e in extras {
+        w = w.array(e)?;
+    }
+    Ok(w.finish()?.into_inner())
+}
+
+/// A clip from the arrays of an archive the product wrote: the lossless kind
+/// (with `skeleton_json`) or the float32 kind (with `parents`, `offsets` and
+/// `joint_names`); `label` names the file in errors.
+pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, MotionError> {
+    let bad = |message: String| -> MotionError {
+        ParseError {
+            file: label.to_path_buf(),
+            line: None,
+            message,
+        }
+        .into()
+    };
+    let find = |name: &str| arrays.iter().find(|a| a.name == name);
+    let need = |name: &str| {
+        find(name).ok_or_else(|| {
+            bad(format!(
+                "no array `{name}`: not a clip written by motionaug (an NPZ clip has \
+                 `root_translation`, `rotations`, `fps` and `skeleton_json` or \
+                 `parents`, `offsets` and `joint_names`)"
+            ))
+        })
+    };
+    // float32 or float64 values of an array, with the shape it must have.
+    let floats = |name: &str, shape: &[usize]| -> Result<Vec<f64>, MotionError> {
+        let a = need(name)?;
+        if a.shape != shape {
+            return Err(bad(format!(
+                "array `{name}` has shape {:?}, expected {shape:?}",
+                a.shape
+            )));
+        }
+        a.to_f64()
+            .or_else(|| a.to_f32().map(|v| v.into_iter().map(f64::from).collect()))
+            .ok_or_else(|| bad(format!("array `{name}` is {:?}, not float", a.dtype)))
+    };
+    let rotations_shape = need("rotations")?.shape.clone();
+    let [t, j, 4] = rotations_shape[..] else {
+        return Err(bad(format!(
+            "array `rotations` has shape {rotations_shape:?}, expected [frames, joints, 4]"
+        )));
+    };
+    let skeleton = match find("skeleton_json") {
+        Some(json) => {
+            let bytes = json
+                .to_u8()
+                .ok_or_else(|| bad("array `skeleton_json` is not uint8".into()))?;
+            let s: Skeleton = serde_json::from_slice(&bytes)
+                .map_err(|e| bad(format!("array `skeleton_json`: {e}")))?;
+            s.validated().map_err(|e| bad(e.to_string()))?
+        }
+        None => skeleton_from_arrays(&need, &floats, j).map_err(|e| match e {
+            MotionError::Parse(p) => MotionError::Parse(p),
+            e => bad(e.to_string()),
+        })?,
+    };
+    if skeleton.len() != j {
+        return Err(bad(format!(
+            "`rotations` has {j} joints, the skeleton {}",
+            skeleton.len()
+        )));
+    }
+    let fps = floats("fps", &[])?[0];
+    let root: Vec<DVec3> = floats("root_translation", &[t, 3])?
+        .chunks_exact(3)
+        .map(|p| DVec3::new(p[0], p[1], p[2]))
+        .collect();
+    let rot: Vec<DQuat> = floats("rotations", &[t, j, 4])?
+        .chunks_exact(4)
+        .map(|q| DQuat::from_xyzw(q[1], q[2], q[3], q[0]))
+        .collect();
+    let tracks: Tracks = match find("translations") {
+        None => Vec::new(),
+        Some(_) => {
+            let rows: Vec<DVec3> = floats("translations", &[t, j, 3])?
+                .chunks_exact(3)
+                .map(|p| DVec3::new(p[0], p[1], p[2]))
+                .collect();
+            (0..j)
+                .map(|k| {
+                    let track: Vec<DVec3> = (0..t).map(|f| rows[f * j + k]).collect();
+                    // Rows that hold the rest offset at every frame are no track.
+                    let rest = skeleton.joint(k).offset;
+                    let rest32 = rest.as_vec3().as_dvec3();
+                    let still = track.iter().all(|p| *p == rest || *p == rest32);
+                    (k > 0 && !still).then_some(track)
+                })
+                .collect()
+        }
+    };
+    let exact = find("skeleton_json").is_some();
+    let mut motion = Motion::new(std::sync::Arc::new(skeleton), fps, root, rot.clone())
+        .and_then(|m| m.with_tracks(tracks))
+        .map_err(|e| bad(e.to_string()))?;
+    if exact {
+        // `Motion::new` renormalises the quaternions, which can move their
+        // last bit; put back the exact values it validated.
+        for frame in 0..t {
+            motion
+                .pose_mut(frame)
+                .copy_from_slice(&rot[frame * j..(frame + 1) * j]);
+        }
+    }
+    Ok(motion)
+}
+
+/// The skeleton of a float32 archive: `joint_names`, `parents`, `offsets`
+/// (metres; the source unit is the metre).
+fn skeleton_from_arrays<'a>(
+    need: &dyn Fn(&str) -> Result<&'a NpyArray, MotionError>,
+    floats: &dyn Fn(&str, &[usize]) -> Result<Vec<f64>, MotionError>,
+    j: usize,
+) -> Result<Skeleton, MotionError> {
+    let invalid = |m: String| MotionError::InvalidSkeleton(m);
+    let names = need("joint_names")?
+        .to_strings()
+        .ok_or_else(|| invalid("array `joint_names` is not a string array".into()))?;
+    let parents = need("parents")?
+        .to_i32()
+        .ok_or_else(|| invalid("array `parents` is not int32".into()))?;
+    let offsets = floats("offsets", &[j, 3])?;
+    // End sites came later: an archive without them has none.
+    let end_sites = match need("end_sites") {
+        Ok(_) => floats("end_sites", &[j, 3])?,
+        Err(_) => vec![f64::NAN; 3 * j],
+    };
+    if names.len() != j || parents.len() != j {
+        return Err(invalid(format!(
+            "{} joint names and {} parents for {j} joints",
+            names.len(),
+            parents.len()
+        )));
+    }
+    let joints = (0..j)
+        .map(|k| {
+            let parent = match parents[k] {
+                -1 => None,
+                p if p >= 0 => Some(p as usize),
+                p => return Err(invalid(format!("joint {k} has parent {p}"))),
+            };
+            Ok(Joint {
+                name: names[k].clone(),
+                parent,
+                offset: DVec3::new(offsets[3 * k], offsets[3 * k + 1], offsets[3 * k + 2]),
+                channels: Vec::new(),
+                end_site: Some(DVec3::from_slice(&end_sites[3 * k..3 * k + 3]))
+                    .filter(|e| !e.is_nan()),
+                limits: None,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Skeleton::new(joints, 1.0)
+}
+
+/// A clip from `.npz` bytes the product wrote (see [`motion_from_arrays`]).
+pub fn read_motion(bytes: &[u8], label: impl AsRef<Path>) -> Result<Motion, MotionError> {
+    let label = label.as_ref();
+    let arrays = read(bytes).map_err(|e| ParseError {
+        file: label.to_path_buf(),
+        line: None,
+        message: format!("not a readable NPZ archive: {e}"),
+    })?;
+    motion_from_arrays(&arrays, label)
 }
 
 fn bad_data(message: String) -> std::io::Error {

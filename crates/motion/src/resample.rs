@@ -1,5 +1,6 @@
 //! Resampling a motion to another frame rate (e.g. 120 Hz mocap to the 30 Hz
-//! the papers train on): rotations by slerp, the root position linearly.
+//! the papers train on): rotations by slerp, the root position and
+//! translation tracks linearly.
 //!
 //! The clip keeps its duration (`frames / fps`): the output has
 //! `round(frames * new_fps / fps)` frames (at least one), frame `k` samples the
@@ -29,6 +30,7 @@ pub fn resample(motion: &Motion, fps: f64) -> Result<Motion, MotionError> {
     let joints = motion.joints();
     let mut root = Vec::with_capacity(frames);
     let mut rotations = Vec::with_capacity(frames * joints);
+    let mut at = Vec::with_capacity(frames);
     for k in 0..frames {
         let s = k as f64 * ratio;
         let i = (s.floor() as usize).min(source_frames - 1);
@@ -38,11 +40,12 @@ pub fn resample(motion: &Motion, fps: f64) -> Result<Motion, MotionError> {
         } else {
             (s - i as f64).clamp(0.0, 1.0)
         };
+        at.push(i as f64 + a);
         root.push(motion.root_translation()[i].lerp(motion.root_translation()[next], a));
         let (p, q) = (motion.pose(i), motion.pose(next));
         rotations.extend(p.iter().zip(q).map(|(x, y)| x.slerp(*y, a)));
     }
-    motion.with_frames(fps, root, rotations)
+    motion.with_frames_and_tracks(fps, root, rotations, motion.tracks_at(&at))
 }
 
 #[cfg(test)]
@@ -96,5 +99,26 @@ mod tests {
         assert!((up.root_translation()[3].x - 1.5 / 120.0).abs() < 1e-12);
         assert!(resample(&m, 0.0).is_err());
         assert_eq!(resample(&clip(1, 120.0), 30.0).unwrap().frames(), 1);
+    }
+
+    #[test]
+    fn resamples_translation_tracks() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+        let walk = crate::load(dir.join("16_11_walk_veer_left.bvh"), &Default::default()).unwrap();
+        // A joint that stretches 1 mm per frame.
+        let j = walk.skeleton().find("LeftLeg").unwrap();
+        let rest = walk.skeleton().joint(j).offset;
+        let track: Vec<DVec3> = (0..walk.frames())
+            .map(|f| rest + DVec3::Y * (f as f64 * 1e-3))
+            .collect();
+        let mut tracks = vec![None; walk.joints()];
+        tracks[j] = Some(track);
+        let m = walk.with_tracks(tracks).unwrap();
+        let r = resample(&m, 30.0).unwrap();
+        // Frame 7 at 30 Hz is source frame 28.
+        assert!((r.local_translation(7, j) - (rest + DVec3::Y * 0.028)).length() < 1e-12);
+        for (a, b) in r.world_positions(7).iter().zip(m.world_positions(28)) {
+            assert!((*a - b).length() < 1e-12);
+        }
     }
 }

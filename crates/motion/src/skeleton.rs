@@ -4,6 +4,13 @@
 //! root. Rest offsets are in metres in the parent's frame, with every rest
 //! orientation the identity: a zero pose is the file's rest pose (the BVH
 //! convention; ASF skeletons are converted to it when read).
+//!
+//! A skeleton may also carry a static *base* above its root: the joints a file
+//! puts above the joint that carries the body's travel when they stand still
+//! over the whole clip (a static `joint_Root` above a moving `Hips`). They are
+//! not animated and take no part in forward kinematics (the root's translation
+//! and rotation are world values); the BVH writer writes them back above the
+//! root, so the file keeps its layout (`docs/TRANSLATION_TRACKS.md`).
 
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -83,11 +90,31 @@ impl Transform {
     };
 }
 
+/// A static joint above the root (see the module doc): as the file had it,
+/// with the constant translation and rotation it held over the clip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BaseJoint {
+    pub name: String,
+    /// The file's `OFFSET`, metres, in the parent's frame.
+    pub offset: DVec3,
+    /// Its constant local translation, metres (for the first base joint, the
+    /// file's root, its world position).
+    pub translation: DVec3,
+    /// Its constant local rotation (for the first, its world rotation).
+    pub rotation: DQuat,
+    /// Channels as the source file lays them out.
+    pub channels: Vec<Channel>,
+    pub end_site: Option<DVec3>,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Skeleton {
     joints: Vec<Joint>,
     /// Metres per length unit of the source file (for writing back in its units).
     source_unit_m: f64,
+    /// Static joints above the root, outermost first (empty for most files).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    base: Vec<BaseJoint>,
 }
 
 impl Skeleton {
@@ -128,7 +155,82 @@ impl Skeleton {
         Ok(Skeleton {
             joints,
             source_unit_m,
+            base: Vec::new(),
         })
+    }
+
+    /// The same skeleton with `base` above its root (outermost first): the
+    /// names must be new and non-empty, the values finite; rotations are
+    /// normalised (left as they are when already unit to 1e-12, so a base
+    /// read back from JSON is the base written).
+    pub fn with_base(mut self, mut base: Vec<BaseJoint>) -> Result<Self, MotionError> {
+        let bad = |m: String| Err(MotionError::InvalidSkeleton(m));
+        for (i, b) in base.iter_mut().enumerate() {
+            if b.name.trim().is_empty() {
+                return bad(format!("base joint {i} has an empty name"));
+            }
+            let finite = b.offset.is_finite()
+                && b.translation.is_finite()
+                && b.end_site.is_none_or(|e| e.is_finite());
+            let n = b.rotation.length();
+            if !finite || !(n.is_finite() && n > 1e-9) {
+                return bad(format!("base joint `{}` has a non-finite value", b.name));
+            }
+            if (n - 1.0).abs() > 1e-12 {
+                b.rotation /= n;
+            }
+        }
+        for (i, b) in base.iter().enumerate() {
+            let twice = base[..i].iter().any(|o| o.name == b.name);
+            if twice || self.joints.iter().any(|j| j.name == b.name) {
+                return bad(format!("joint name `{}` appears twice", b.name));
+            }
+        }
+        self.base = base;
+        Ok(self)
+    }
+
+    /// Validates a skeleton that did not come from [`Skeleton::new`] (serde
+    /// deserialisation bypasses it): the checks of `new` and `with_base`.
+    pub fn validated(self) -> Result<Self, MotionError> {
+        let Skeleton {
+            joints,
+            source_unit_m,
+            base,
+        } = self;
+        Skeleton::new(joints, source_unit_m)?.with_base(base)
+    }
+
+    /// Static joints above the root, outermost first (see the module doc).
+    pub fn base(&self) -> &[BaseJoint] {
+        &self.base
+    }
+
+    /// World transform of each base joint, outermost first.
+    pub fn base_transforms(&self) -> Vec<Transform> {
+        let mut out: Vec<Transform> = Vec::with_capacity(self.base.len());
+        for b in &self.base {
+            out.push(match out.last() {
+                None => Transform {
+                    translation: b.translation,
+                    rotation: b.rotation,
+                },
+                Some(p) => Transform {
+                    translation: p.translation + p.rotation * b.translation,
+                    rotation: (p.rotation * b.rotation).normalize(),
+                },
+            });
+        }
+        out
+    }
+
+    /// The frame the root's local values are written in: the world transform
+    /// of the innermost base joint (identity without a base).
+    pub fn base_frame(&self) -> Transform {
+        self.base_transforms()
+            .last()
+            .copied()
+            .unwrap_or(Transform::IDENTITY)
     }
 
     pub fn joints(&self) -> &[Joint] {
@@ -208,6 +310,19 @@ impl Skeleton {
     /// `root` is the world position of the root joint, `pose` one local rotation
     /// per joint. `out` must have one slot per joint.
     pub fn forward(&self, root: DVec3, pose: &[DQuat], out: &mut [Transform]) {
+        self.forward_with(root, pose, |j| self.joints[j].offset, out);
+    }
+
+    /// Forward kinematics with each joint's local translation from `offset`
+    /// (a motion's translation tracks; [`Skeleton::forward`] uses the rest
+    /// offsets). `offset` is not asked for the root.
+    pub fn forward_with(
+        &self,
+        root: DVec3,
+        pose: &[DQuat],
+        offset: impl Fn(usize) -> DVec3,
+        out: &mut [Transform],
+    ) {
         assert_eq!(pose.len(), self.joints.len(), "pose has wrong joint count");
         assert_eq!(out.len(), self.joints.len(), "output has wrong joint count");
         for (i, joint) in self.joints.iter().enumerate() {
@@ -219,7 +334,7 @@ impl Skeleton {
                 Some(p) => {
                     let parent = out[p];
                     Transform {
-                        translation: parent.translation + parent.rotation * joint.offset,
+                        translation: parent.translation + parent.rotation * offset(i),
                         rotation: parent.rotation * pose[i],
                     }
                 }

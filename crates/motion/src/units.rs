@@ -113,10 +113,16 @@ impl FromStr for Unit {
 /// T-pose the arm span, which for people is about the height too; it does not
 /// depend on which axis the file uses as up.
 pub fn rest_size(skeleton: &Skeleton) -> f64 {
+    rest_size_of(skeleton, |_| true)
+}
+
+/// [`rest_size`] of the joints `include` picks (a static root far from the
+/// body it holds is not part of the body).
+pub fn rest_size_of(skeleton: &Skeleton, include: impl Fn(usize) -> bool) -> f64 {
     let positions = skeleton.rest_positions();
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for (i, p) in positions.iter().enumerate() {
+    for (i, p) in positions.iter().enumerate().filter(|(i, _)| include(*i)) {
         lo = lo.min(*p);
         hi = hi.max(*p);
         if let Some(e) = skeleton.joint(i).end_site {

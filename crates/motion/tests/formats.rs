@@ -216,6 +216,332 @@ proptest! {
     }
 }
 
+// --- Translation tracks: animated position channels on any joint ---
+
+/// Random translation tracks for a [`Case`]: which joints get one, where
+/// their values centre (the offset, zero or elsewhere: the reader's rule and
+/// the writer's choice of `OFFSET` both get exercised) and the motion.
+#[derive(Debug, Clone)]
+struct TrackSpec {
+    tracked: Vec<bool>,
+    centre: Vec<u8>,
+    elsewhere: Vec<[f64; 3]>,
+    deltas: Vec<[f64; 3]>,
+}
+
+fn track_spec(joints: usize, frames: usize) -> impl Strategy<Value = TrackSpec> {
+    (
+        prop::collection::vec(any::<bool>(), joints),
+        prop::collection::vec(0u8..3, joints),
+        prop::collection::vec(prop::array::uniform3(-80.0f64..80.0), joints),
+        prop::collection::vec(prop::array::uniform3(-30.0f64..30.0), joints * frames),
+    )
+        .prop_map(|(tracked, centre, elsewhere, deltas)| TrackSpec {
+            tracked,
+            centre,
+            elsewhere,
+            deltas,
+        })
+}
+
+fn case_with_tracks() -> impl Strategy<Value = (Case, TrackSpec)> {
+    case().prop_flat_map(|c| {
+        let (n, frames) = (c.joints.len(), c.frames);
+        (Just(c), track_spec(n, frames))
+    })
+}
+
+/// `motion` with the tracks of `spec` on its non-root joints (file units
+/// scaled by the skeleton's unit).
+fn with_tracks(motion: Motion, spec: &TrackSpec) -> Motion {
+    let scale = motion.skeleton().source_unit_m();
+    let n = motion.joints();
+    let tracks: Vec<Option<Vec<DVec3>>> = (0..n)
+        .map(|j| {
+            if j == 0 || !spec.tracked[j] {
+                return None;
+            }
+            let offset = motion.skeleton().joint(j).offset;
+            let centre = match spec.centre[j] {
+                0 => offset,
+                1 => DVec3::ZERO,
+                _ => DVec3::from_array(spec.elsewhere[j]) * scale,
+            };
+            Some(
+                (0..motion.frames())
+                    .map(|f| centre + DVec3::from_array(spec.deltas[f * n + j]) * scale)
+                    .collect(),
+            )
+        })
+        .collect();
+    motion.with_tracks(tracks).unwrap()
+}
+
+/// World position of every joint by name at frame `f`, the base's too.
+fn named_positions(m: &Motion, f: usize) -> std::collections::HashMap<String, DVec3> {
+    let s = m.skeleton();
+    let mut out: std::collections::HashMap<String, DVec3> = s
+        .base()
+        .iter()
+        .zip(s.base_transforms())
+        .map(|(b, t)| (b.name.clone(), t.translation))
+        .collect();
+    for (j, p) in m.world_positions(f).into_iter().enumerate() {
+        out.insert(s.joint(j).name.clone(), p);
+    }
+    out
+}
+
+/// Largest world distance between joints of the same name (every joint of
+/// `a` must be in `b`, as a joint or a base joint).
+fn named_position_error(a: &Motion, b: &Motion) -> f64 {
+    assert_eq!(a.frames(), b.frames());
+    let mut worst: f64 = 0.0;
+    for f in 0..a.frames() {
+        let (pa, pb) = (named_positions(a, f), named_positions(b, f));
+        assert_eq!(pa.len(), pb.len(), "same joints, base included");
+        for (name, p) in &pa {
+            worst = worst.max((*p - pb[name]).length());
+        }
+    }
+    worst
+}
+
+/// A [`Case`] whose root stands still with one child, the travelling joint,
+/// which gets a translation track; everything else hangs below that child.
+fn static_root(case: &Case, spec: &TrackSpec) -> Motion {
+    let mut case = case.clone();
+    let n = case.joints.len();
+    for (i, j) in case.joints.iter_mut().enumerate().skip(2) {
+        j.parent_pick = j.parent_pick % (i - 1) + 1; // parent in 1..i
+    }
+    if n > 1 {
+        case.joints[1].parent_pick = 0;
+    }
+    let m = build(&case, true);
+    // The root: its first frame, held.
+    let (p0, q0) = (m.root_translation()[0], m.rotation(0, 0));
+    let root = vec![p0; m.frames()];
+    let mut rotations = m.rotations().to_vec();
+    for f in 0..m.frames() {
+        rotations[f * n] = q0;
+    }
+    let held = m.with_frames(m.fps(), root, rotations).unwrap();
+    let mut spec = spec.clone();
+    spec.tracked = (0..n).map(|j| j == 1).collect();
+    with_tracks(held, &spec)
+}
+
+/// Columns of the position channels of non-root joints in a written file.
+fn joint_position_columns(text: &str) -> Vec<usize> {
+    let mut columns = Vec::new();
+    let mut col = 0;
+    for (k, line) in text.lines().filter(|l| l.contains("CHANNELS")).enumerate() {
+        for name in line.split_whitespace().skip(2) {
+            if k > 0 && name.ends_with("position") {
+                columns.push(col);
+            }
+            col += 1;
+        }
+    }
+    columns
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn bvh_round_trip_keeps_translation_tracks((case, spec) in case_with_tracks()) {
+        let m = with_tracks(build(&case, false), &spec);
+        let text = bvh::to_bytes(&m);
+        let back = bvh::parse(&text, "tracks.bvh", case.unit).unwrap();
+        let err = named_position_error(&m, &back);
+        prop_assert!(err < 1e-5, "error {err} m\n{}", String::from_utf8_lossy(&text));
+        // Varying tracks stay tracks (or become the root if a static root above was folded).
+        if m.frames() > 1 {
+            for j in 1..m.joints() {
+                let name = &m.skeleton().joint(j).name;
+                let k = back.skeleton().find(name).unwrap();
+                prop_assert!(m.track(j).is_none() || k == 0 || back.track(k).is_some(), "{}", name);
+            }
+        }
+    }
+
+    #[test]
+    fn bvh_static_root_above_a_travelling_joint_is_folded((case, spec) in case_with_tracks()) {
+        prop_assume!(case.joints.len() >= 2);
+        let m = static_root(&case, &spec);
+        let text = bvh::to_bytes(&m);
+        let back = bvh::parse(&text, "static.bvh", case.unit).unwrap();
+        let err = named_position_error(&m, &back);
+        prop_assert!(err < 1e-5, "error {err} m\n{}", String::from_utf8_lossy(&text));
+        if m.frames() > 1 {
+            // The travelling joint is the root, the still one the base.
+            prop_assert_eq!(back.joints(), m.joints() - 1);
+            prop_assert_eq!(&back.skeleton().joint(0).name, &m.skeleton().joint(1).name);
+            prop_assert_eq!(&back.skeleton().base()[0].name, &m.skeleton().joint(0).name);
+            // And it stays so through a second round trip.
+            let again = bvh::parse(&bvh::to_bytes(&back), "again.bvh", case.unit).unwrap();
+            prop_assert!(named_position_error(&back, &again) < 1e-5);
+            prop_assert_eq!(again.skeleton().base().len(), 1);
+        }
+    }
+
+    #[test]
+    fn bvh_malformed_translation_values_name_the_line(
+        (case, spec) in case_with_tracks(),
+        pick in any::<usize>(),
+        frame_pick in any::<usize>(),
+        kind in 0u8..3,
+    ) {
+        let m = with_tracks(build(&case, false), &spec);
+        let text = String::from_utf8(bvh::to_bytes(&m)).unwrap();
+        let columns = joint_position_columns(&text);
+        prop_assume!(!columns.is_empty());
+        let lines: Vec<&str> = text.lines().collect();
+        let first_frame = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 1;
+        let f = frame_pick % m.frames();
+        let col = columns[pick % columns.len()];
+        let mut tokens: Vec<String> = lines[first_frame + f].split_whitespace().map(String::from).collect();
+        let expect = match kind {
+            0 => { tokens[col] = "nan".into(); "not a finite number" }
+            1 => { tokens.remove(col); "values" }
+            _ => { tokens.insert(col, "1.5".into()); "values" }
+        };
+        let mut edited: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        edited[first_frame + f] = tokens.join(" ");
+        let bad = edited.join("\n") + "\n";
+        match bvh::parse(bad.as_bytes(), "bad.bvh", case.unit) {
+            Err(motion::MotionError::Parse(e)) => {
+                prop_assert_eq!(e.line, Some(first_frame + f + 1), "{}", e);
+                prop_assert!(e.message.contains(expect), "{}", e);
+                prop_assert!(e.to_string().starts_with("bad.bvh:"), "{}", e);
+            }
+            other => prop_assert!(false, "expected a parse error, got {:?}", other.map(|m| m.frames())),
+        }
+    }
+}
+
+// --- NPZ in: the archives the product writes read back as clips ---
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 100, ..ProptestConfig::default() })]
+
+    #[test]
+    fn npz_clips_read_back((case, spec) in case_with_tracks(), folded in any::<bool>()) {
+        let m = if folded && case.joints.len() >= 2 {
+            // Through BVH, so the static root is folded into a base.
+            let s = static_root(&case, &spec);
+            bvh::parse(&bvh::to_bytes(&s), "s.bvh", case.unit).unwrap()
+        } else {
+            with_tracks(build(&case, true), &spec)
+        };
+        // Lossless: the same clip, bit for bit.
+        let exact = motion::npz::exact_to_bytes(&m, &[]).unwrap();
+        let back = motion::npz::read_motion(&exact, "exact.npz").unwrap();
+        prop_assert_eq!(&back, &m);
+        // float32: the same joints and motion to float precision.
+        let f32s = motion::npz::motion_to_bytes(&m, &[]).unwrap();
+        let back = motion::npz::read_motion(&f32s, "f32.npz").unwrap();
+        prop_assert_eq!(back.joints(), m.joints());
+        prop_assert_eq!(back.fps(), m.fps());
+        prop_assert_eq!(back.has_tracks(), m.has_tracks());
+        for (a, b) in back.skeleton().joints().iter().zip(m.skeleton().joints()) {
+            prop_assert_eq!(a.end_site.is_some(), b.end_site.is_some());
+            if let (Some(x), Some(y)) = (a.end_site, b.end_site) {
+                prop_assert!((x - y).length() < 1e-5);
+            }
+        }
+        let err = max_position_error(&m, &back);
+        prop_assert!(err < 1e-4, "error {err} m");
+    }
+
+    #[test]
+    fn npz_clip_reader_never_panics(
+        (case, spec) in case_with_tracks(),
+        edits in prop::collection::vec((any::<usize>(), any::<u8>(), 0u8..4), 1..4),
+        which in 0u8..2,
+    ) {
+        let m = with_tracks(build(&case, false), &spec);
+        let mut bytes = if which == 0 {
+            motion::npz::exact_to_bytes(&m, &[]).unwrap()
+        } else {
+            motion::npz::motion_to_bytes(&m, &[]).unwrap()
+        };
+        mutate(&mut bytes, &edits);
+        let _ = motion::npz::read_motion(&bytes, "fuzz.npz");
+    }
+}
+
+#[test]
+fn npz_clips_that_cannot_be_read_are_named() {
+    use motion::npz::{NpzWriter, read_motion};
+    let walk = motion::load(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../examples/data/16_11_walk_veer_left.bvh"),
+        &Default::default(),
+    )
+    .unwrap();
+    let err = |bytes: &[u8]| read_motion(bytes, "in/clip.npz").unwrap_err().to_string();
+    let e = err(b"not a zip");
+    assert!(
+        e.starts_with("in/clip.npz: not a readable NPZ archive"),
+        "{e}"
+    );
+    // An archive of other arrays.
+    let other = NpzWriter::new(std::io::Cursor::new(Vec::new()))
+        .array_f32("x", &[1], &[1.0])
+        .unwrap()
+        .finish()
+        .unwrap()
+        .into_inner();
+    let e = err(&other);
+    assert!(
+        e.contains("in/clip.npz") && e.contains("no array `rotations`"),
+        "{e}"
+    );
+    // A non-finite root position, a wrong shape.
+    let arrays = motion::npz::read(&motion::npz::motion_to_bytes(&walk, &[]).unwrap()).unwrap();
+    let rebuilt = |change: &dyn Fn(&mut motion::npz::NpyArray)| {
+        let mut w = NpzWriter::new(std::io::Cursor::new(Vec::new()));
+        for a in &arrays {
+            let mut a = a.clone();
+            change(&mut a);
+            w = w.array(&a).unwrap();
+        }
+        w.finish().unwrap().into_inner()
+    };
+    let nan = rebuilt(&|a| {
+        if a.name == "root_translation" {
+            a.data[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
+        }
+    });
+    let e = err(&nan);
+    assert!(
+        e.contains("in/clip.npz") && e.contains("frame 1: root position is not finite"),
+        "{e}"
+    );
+    let shape = rebuilt(&|a| {
+        if a.name == "offsets" {
+            a.shape = vec![a.shape[0] * 3];
+        }
+    });
+    let e = err(&shape);
+    assert!(e.contains("array `offsets` has shape"), "{e}");
+    // Extras such as a mask do not get in the way.
+    let mask = motion::npz::NpyArray::bool(
+        "mask",
+        &[walk.frames(), walk.joints()],
+        &vec![true; walk.frames() * walk.joints()],
+    )
+    .unwrap();
+    let with_mask = motion::npz::motion_to_bytes(&walk, &[mask]).unwrap();
+    assert_eq!(
+        read_motion(&with_mask, "m.npz").unwrap().frames(),
+        walk.frames()
+    );
+}
+
 /// Apply byte edits: replace, delete, insert or truncate at a position.
 fn mutate(text: &mut Vec<u8>, edits: &[(usize, u8, u8)]) {
     for &(pos, byte, kind) in edits {
@@ -354,6 +680,7 @@ fn npz_holds_the_motion_and_extras() {
     assert_eq!(a["root_translation"].shape, vec![t, 3]);
     assert_eq!(a["parents"].to_i32().unwrap(), vec![-1, 0, 1, 0]);
     assert_eq!(a["offsets"].shape, vec![j, 3]);
+    assert_eq!(a["end_sites"].shape, vec![j, 3]);
     assert_eq!(
         a["joint_names"].to_strings().unwrap(),
         vec!["root", "lfemur", "ltibia", "lowerback"]

@@ -1,6 +1,7 @@
 //! The reference clip as the simulation needs it: resampled to the control
 //! rate, per simulated body (world pose of its driver joint, relative rotation
-//! to its parent body, velocities from central finite differences), plus the
+//! to its parent body, velocities from central finite differences; joints
+//! with translation tracks where the clip puts them), plus the
 //! file's local rotations (for merged joints when recording), the centre of
 //! mass and the lowest point of every body shape (to tell a fall from a
 //! reference that itself touches the floor).
@@ -71,7 +72,14 @@ impl Reference {
         for k in 0..count {
             let t = (k as f64 / hz).min(last_t);
             let root = sample(motion, t, &mut pose);
-            motion.skeleton().forward(root, &pose, &mut world);
+            // Translation tracks (joints a file animates the offset of) at the same time.
+            let s = t * motion.fps();
+            motion.skeleton().forward_with(
+                root,
+                &pose,
+                |j| motion.local_translation_at(s, j),
+                &mut world,
+            );
             let mut bodies = Vec::with_capacity(n_b);
             let mut lowest = Vec::with_capacity(n_b);
             let mut com = Vec3::ZERO;

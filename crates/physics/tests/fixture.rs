@@ -453,3 +453,44 @@ fn a_tracker_sees_the_upcoming_reference_frames_not_the_phase() {
     assert!(!step.done);
     assert_ne!(env.obs()[2 + 15 * n..], obs[2 + 15 * n..]);
 }
+
+/// Translation tracks (a file that animates a joint's offset) drive the
+/// reference the character imitates: a stretching shin moves the foot body.
+#[test]
+fn the_reference_follows_translation_tracks() {
+    use physics::reference::Reference;
+    let motion = sway(cmu_humanoid(), 1.0, 120.0);
+    let sk = motion.skeleton().clone();
+    let spec = CharacterSpec::build(sk.clone(), &CharacterOptions::default()).unwrap();
+    let ankle = sk.find("LeftAnkle").unwrap();
+    let rest = sk.joint(ankle).offset;
+    let mut tracks = vec![None; motion.joints()];
+    tracks[ankle] = Some(
+        (0..motion.frames())
+            .map(|f| rest * (1.0 + f as f64 / 1200.0))
+            .collect(),
+    );
+    let stretched = motion.clone().with_tracks(tracks).unwrap();
+    let (a, b) = (
+        Reference::new(&motion, &spec, 30.0),
+        Reference::new(&stretched, &spec, 30.0),
+    );
+    let foot = match spec.joint_map[ankle] {
+        JointMapping::Body(b) => b,
+        JointMapping::MergedInto(_) => panic!("the ankle drives the foot"),
+    };
+    // The shin (lower leg body to foot body) is 1 + f/1200 times its rest
+    // length at clip frame f; control frame k (30 Hz) is clip frame 4 k.
+    let shin = |r: &Reference, k: usize| {
+        let leg = spec.bodies[foot].parent.unwrap();
+        (r.frames[k].bodies[foot].pos - r.frames[k].bodies[leg].pos).length() as f64
+    };
+    let k = a.frames.len() - 1;
+    let stretch = shin(&b, k) - shin(&a, k);
+    let expect = rest.length() * (4 * k) as f64 / 1200.0;
+    assert!(
+        (stretch - expect).abs() < 1e-5,
+        "stretch {stretch}, expected {expect}"
+    );
+    assert!((shin(&b, 0) - shin(&a, 0)).abs() < 1e-6);
+}

@@ -1,15 +1,15 @@
 //! A lossless encoding of a clip between jobs that run in different processes
-//! (the service's workers): an NPZ with the root translation and rotations in
-//! f64, the frame rate, the skeleton as JSON (serde_json round-trips f64
-//! exactly with `float_roundtrip`, which the workspace enables) and the
+//! (the service's workers): the motion crate's lossless NPZ
+//! (`motion::npz::exact_to_bytes`: root translation, rotations and
+//! translation tracks in f64, the frame rate, the skeleton as JSON) plus the
 //! occlusion mask when there is one. The output BVH and NPZ round their
 //! numbers; this does not, so a clip handed from one job to the next is the
-//! clip the first job made.
+//! clip the first job made. `motionaug` and the service also read it as an
+//! input clip (`motion::io`).
 
-use std::sync::Arc;
+use std::path::Path;
 
 use motion::Motion;
-use motion::skeleton::Skeleton;
 
 use crate::PipelineError;
 
@@ -19,66 +19,21 @@ fn bad(what: impl std::fmt::Display) -> PipelineError {
 
 /// Encodes `motion` (and its mask) losslessly.
 pub fn encode_clip(motion: &Motion, mask: Option<&synth::Mask>) -> Result<Vec<u8>, PipelineError> {
-    let (t, j) = (motion.frames(), motion.joints());
-    let root: Vec<f64> = motion
-        .root_translation()
-        .iter()
-        .flat_map(|p| [p.x, p.y, p.z])
-        .collect();
-    let rot: Vec<f64> = motion
-        .rotations()
-        .iter()
-        .flat_map(|q| [q.w, q.x, q.y, q.z])
-        .collect();
-    let skeleton = serde_json::to_vec(motion.skeleton().as_ref()).map_err(bad)?;
-    let mut w = motion::npz::NpzWriter::new(std::io::Cursor::new(Vec::new()))
-        .array_f64("root_translation", &[t, 3], &root)
-        .and_then(|w| w.array_f64("rotations", &[t, j, 4], &rot))
-        .and_then(|w| w.scalar_f64("fps", motion.fps()))
-        .and_then(|w| w.array_u8("skeleton_json", &[skeleton.len()], &skeleton))
-        .map_err(bad)?;
+    let mut extras = Vec::new();
     if let Some(mask) = mask {
-        w = w
-            .array_bool("mask", &[mask.frames, mask.joints], &mask.visible)
-            .map_err(bad)?;
+        extras.push(
+            motion::npz::NpyArray::bool("mask", &[mask.frames, mask.joints], &mask.visible)
+                .map_err(bad)?,
+        );
     }
-    Ok(w.finish().map_err(bad)?.into_inner())
+    motion::npz::exact_to_bytes(motion, &extras).map_err(bad)
 }
 
 /// Decodes what [`encode_clip`] wrote.
 pub fn decode_clip(bytes: &[u8]) -> Result<(Motion, Option<synth::Mask>), PipelineError> {
     let arrays = motion::npz::read(bytes).map_err(bad)?;
-    let find = |name: &str| arrays.iter().find(|a| a.name == name);
-    let f64s = |name: &str| {
-        find(name)
-            .and_then(|a| a.to_f64())
-            .ok_or_else(|| bad(format!("no float64 array `{name}`")))
-    };
-    let (root, rot, fps) = (f64s("root_translation")?, f64s("rotations")?, f64s("fps")?);
-    let fps = *fps.first().ok_or_else(|| bad("empty fps"))?;
-    let json = find("skeleton_json")
-        .and_then(|a| a.to_u8())
-        .ok_or_else(|| bad("no skeleton"))?;
-    let skeleton: Skeleton = serde_json::from_slice(&json).map_err(bad)?;
-    let skeleton = Skeleton::new(skeleton.joints().to_vec(), skeleton.source_unit_m())?;
-    let root = root
-        .chunks_exact(3)
-        .map(|p| motion::glam::DVec3::new(p[0], p[1], p[2]))
-        .collect();
-    let rot: Vec<motion::glam::DQuat> = rot
-        .chunks_exact(4)
-        .map(|q| motion::glam::DQuat::from_xyzw(q[1], q[2], q[3], q[0]))
-        .collect();
-    let mut motion = Motion::new(Arc::new(skeleton), fps, root, rot.clone())?;
-    // `Motion::new` renormalises the quaternions, which can move their last
-    // bit; put back the exact values it validated.
-    let joints = motion.joints();
-    for frame in 0..motion.frames() {
-        motion
-            .pose_mut(frame)
-            .copy_from_slice(&rot[frame * joints..(frame + 1) * joints]);
-    }
-    let mask = match find("mask") {
+    let motion = motion::npz::motion_from_arrays(&arrays, Path::new("encoded clip"))?;
+    let mask = match arrays.iter().find(|a| a.name == "mask") {
         None => None,
         Some(a) => {
             let visible: Vec<bool> = a
@@ -121,5 +76,18 @@ mod tests {
         assert_eq!(back.rotations(), m.rotations());
         assert_eq!(back_mask, Some(mask));
         assert!(decode_clip(b"not an npz").is_err());
+        // A static base and translation tracks come through too.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+        let s = motion::load(dir.join("static_root_walk.bvh"), &Default::default()).unwrap();
+        let n = s.joints();
+        let track = (0..s.frames())
+            .map(|f| s.skeleton().joint(2).offset * (1.0 + f as f64 * 1e-3))
+            .collect();
+        let mut tracks = vec![None; n];
+        tracks[2] = Some(track);
+        let s = s.with_tracks(tracks).unwrap();
+        let (back, _) = decode_clip(&encode_clip(&s, None).unwrap()).unwrap();
+        assert_eq!(back, s);
+        assert_eq!(back.skeleton().base()[0].name, "joint_Root");
     }
 }

@@ -5,7 +5,8 @@
 //! axis `z` for clips facing +-x). Root positions become `M p`. A rotation `R`
 //! becomes `M R M`, which for a quaternion `(w, x, y, z)` and an x mirror is
 //! `(w, x, -y, -z)`. Paired joints swap their (reflected) local rotations; joints
-//! on the centre line keep their own, reflected.
+//! on the centre line keep their own, reflected. Translation tracks are
+//! reflected (`M t`) and move to the partner joint like rotations.
 //!
 //! The skeleton is kept as it is (offsets untouched), so the output is an exact
 //! mirror image only if the skeleton is mirror-symmetric: paired joints have
@@ -152,7 +153,13 @@ pub fn mirror(
             rot[t * n + partner[j]] = reflect_rotation(pose[j], m);
         }
     }
-    let mut out = Augmented::new(motion.with_frames(motion.fps(), root, rot)?);
+    let mut tracks: motion::Tracks = vec![None; motion.tracks().len()];
+    for (j, track) in motion.tracks().iter().enumerate() {
+        if let Some(track) = track {
+            tracks[partner[j]] = Some(track.iter().map(|t| m * *t).collect());
+        }
+    }
+    let mut out = Augmented::new(motion.with_frames_and_tracks(motion.fps(), root, rot, tracks)?);
     out.sampled.insert("max_asymmetry_m".into(), worst.into());
     Ok(out)
 }

@@ -6,7 +6,7 @@
 //! the same: the output has `round((T-1)/s) + 1` frames, spread exactly over the
 //! source's first to last frame (so the factor actually applied, reported as
 //! `factor`, differs from the drawn one by the rounding). Rotations are slerped,
-//! the root position is linearly interpolated.
+//! the root position and translation tracks are linearly interpolated.
 
 use glam::{DQuat, DVec3};
 use motion::Motion;
@@ -79,11 +79,13 @@ pub fn time_warp(
     };
     let mut root = Vec::with_capacity(n);
     let mut rot = Vec::with_capacity(n * motion.joints());
-    for i in 0..n {
-        sample_at(motion, i as f64 * step, &mut root, &mut rot);
+    let at: Vec<f64> = (0..n).map(|i| i as f64 * step).collect();
+    for &s in &at {
+        sample_at(motion, s, &mut root, &mut rot);
     }
     let applied = if n > 1 { step } else { drawn };
-    let mut out = Augmented::new(motion.with_frames(motion.fps(), root, rot)?);
+    let tracks = motion.tracks_at(&at);
+    let mut out = Augmented::new(motion.with_frames_and_tracks(motion.fps(), root, rot, tracks)?);
     out.sampled.insert("factor_drawn".into(), drawn.into());
     out.sampled.insert("factor".into(), applied.into());
     Ok(out)

@@ -269,3 +269,73 @@ fn masks_follow_the_mode_and_probability() {
     assert!(mask(&m, &bad, &mut rng_from_seed(0)).is_err());
     assert!(mask(&m, &MaskParams::random_joints(1.5), &mut rng_from_seed(0)).is_err());
 }
+
+/// The walk with translation tracks on a centre joint (the spine slides
+/// forward and back) and a left one (the left shin stretches).
+fn walk_with_tracks() -> motion::Motion {
+    let m = walk(61, 30.0, 1.0);
+    let s = m.skeleton().clone();
+    let (spine, shin) = (s.find("Spine").unwrap(), s.find("LeftFoot").unwrap());
+    let mut tracks = vec![None; m.joints()];
+    let wave = |f: usize| (f as f64 * 0.3).sin();
+    tracks[spine] = Some(
+        (0..m.frames())
+            .map(|f| s.joint(spine).offset + DVec3::new(0.0, 0.0, 0.02 * wave(f)))
+            .collect(),
+    );
+    tracks[shin] = Some(
+        (0..m.frames())
+            .map(|f| s.joint(shin).offset * (1.0 + 0.03 * wave(f)))
+            .collect(),
+    );
+    m.with_tracks(tracks).unwrap()
+}
+
+#[test]
+fn ops_carry_translation_tracks() {
+    let m = walk_with_tracks();
+    let s = m.skeleton().clone();
+    let (spine, left, right) = (
+        s.find("Spine").unwrap(),
+        s.find("LeftFoot").unwrap(),
+        s.find("RightFoot").unwrap(),
+    );
+    // Ops that keep the frames keep the tracks.
+    let noisy = noise(&m, &NoiseParams::default(), &mut rng_from_seed(1)).unwrap();
+    let masked = mask(&m, &MaskParams::lower_body(), &mut rng_from_seed(1)).unwrap();
+    let reached = ik(&m, &IkParams::preset(Preset::Kick), &mut rng_from_seed(1)).unwrap();
+    for out in [&noisy, &masked, &reached] {
+        assert_eq!(out.motion.tracks(), m.tracks());
+    }
+    let r: IkReport =
+        serde_json::from_value(serde_json::Value::Object(reached.sampled.clone())).unwrap();
+    let effector = s.find(&r.effector).unwrap();
+    let at = reached.motion.world_positions(r.keyframe)[effector];
+    assert!((at - DVec3::from_array(r.target)).length() < 1e-6, "{r:?}");
+    // Time warp interpolates them: output frame 1 is source frame 1.25.
+    let p = TimeWarpParams {
+        factor: Range(1.25, 1.25),
+    };
+    let w = time_warp(&m, &p, &mut rng_from_seed(0)).unwrap().motion;
+    let expect = m.track(spine).unwrap()[1].lerp(m.track(spine).unwrap()[2], 0.25);
+    assert!((w.track(spine).unwrap()[1] - expect).length() < 1e-12);
+    for (a, b) in w.world_positions(4).iter().zip(m.world_positions(5)) {
+        assert!((*a - b).length() < 1e-9);
+    }
+    // Mirror reflects them onto the partner joint: world positions mirror exactly.
+    let mirrored = mirror(&m, &MirrorParams::default(), &mut rng_from_seed(0))
+        .unwrap()
+        .motion;
+    assert!(mirrored.track(left).is_none() && mirrored.track(right).is_some());
+    let pairs = synth::names::Pairs::from_names(&s);
+    let flip = |p: DVec3| DVec3::new(-p.x, p.y, p.z);
+    for t in 0..m.frames() {
+        let (a, b) = (m.world_positions(t), mirrored.world_positions(t));
+        for j in 0..m.joints() {
+            assert!(
+                (b[pairs.partner[j]] - flip(a[j])).length() < 1e-9,
+                "frame {t} joint {j}"
+            );
+        }
+    }
+}

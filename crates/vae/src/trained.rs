@@ -280,10 +280,7 @@ impl TrainedVae {
             )));
         }
         // Re-validate the skeleton (serde bypasses its constructor).
-        let skeleton = Skeleton::new(
-            meta.skeleton.joints().to_vec(),
-            meta.skeleton.source_unit_m(),
-        )?;
+        let skeleton = meta.skeleton.clone().validated()?;
         let vae = Vae::new(&meta.config, frame_dim(skeleton.len()), 0)?;
         let weights_path = dir.join(WEIGHTS_FILE);
         let tensors = candle_core::safetensors::load(&weights_path, &Device::Cpu)

@@ -238,3 +238,34 @@ fn real_clip_features_round_trip_to_the_same_poses() {
         assert!((a[0].y - b[0].y).abs() < 1e-4);
     }
 }
+
+/// A static root above the travelling Hips: the reader makes the Hips the
+/// root, so the VAE sees the walk's own root path (the same features as the
+/// walk written the usual way); its samples keep the file's static root
+/// through save and load, so they are written back in the file's layout.
+#[test]
+fn a_static_root_above_the_hips_trains_and_samples_as_the_walk() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    let layered = motion::load(dir.join("static_root_walk.bvh"), &Default::default()).unwrap();
+    let walk = motion::load(dir.join("16_11_walk_veer_left.bvh"), &Default::default()).unwrap();
+    let walk60 = motion::resample::resample(&walk, 60.0).unwrap();
+    let config = FeatureConfig::default();
+    let (a, b) = (
+        clip_frames(&layered, &config).unwrap(),
+        clip_frames(&walk60, &config).unwrap(),
+    );
+    // The layered file holds the walk's first 3 s: the same features over them.
+    assert!(a.len() <= b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() < 1e-4, "{x} vs {y}");
+    }
+    let model = vae::train(&[layered.clone()], &tiny_config(4), |_| {}).unwrap();
+    let saved = tempfile::tempdir().unwrap();
+    model.save(saved.path()).unwrap();
+    let loaded = TrainedVae::load(saved.path()).unwrap();
+    let sample = &loaded.sample(1, Prior::Near, 3).unwrap()[0].motion;
+    assert_eq!(sample.skeleton().joint(0).name, "Hips");
+    assert_eq!(sample.skeleton().base()[0].name, "joint_Root");
+    let text = motion::bvh::to_bytes(sample);
+    assert!(text.starts_with(b"HIERARCHY\nROOT joint_Root\n"));
+}

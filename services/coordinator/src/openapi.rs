@@ -133,7 +133,8 @@ impl PartialSchema for DatasetUpload {
                 "file": {
                     "type": "array",
                     "items": {"type": "string", "format": "binary"},
-                    "description": "BVH, ASF, AMC files or zips of them; AMC motions pair with \
+                    "description": "BVH, ASF, AMC files, NPZ clips motionaug wrote, or zips of them; \
+                        AMC motions pair with \
                         an ASF of the same upload (the only one, or the one whose name is the \
                         longest prefix of the AMC's name)"
                 },

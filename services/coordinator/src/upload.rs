@@ -1,7 +1,8 @@
 //! Turning the files of an upload into validated clips.
 //!
 //! Zips are unpacked (with limits on entry count and unpacked size), every file is
-//! parsed with the motion crate's readers, AMC motions are paired with an ASF of
+//! parsed with the motion crate's readers (BVH, ASF/AMC, and the NPZ clips the
+//! product writes, so outputs can be uploaded again), AMC motions are paired with an ASF of
 //! the same upload, every clip is checked against the frame limit, and the two
 //! clips of an interaction pair (`<stem>_A`, `<stem>_B`) must match in length. The first
 //! problem rejects the whole upload with an error naming the file and line, so a
@@ -46,6 +47,7 @@ enum Kind {
     Bvh,
     Asf,
     Amc,
+    Npz,
     Zip,
 }
 
@@ -122,9 +124,11 @@ fn kind_of(file: &UploadFile) -> Result<Kind, ApiError> {
         Some("bvh") => Ok(Kind::Bvh),
         Some("asf") => Ok(Kind::Asf),
         Some("amc") => Ok(Kind::Amc),
+        Some("npz") => Ok(Kind::Npz),
         Some("zip") => Ok(Kind::Zip),
         _ => Err(ApiError::unprocessable(format!(
-            "{}: unsupported file type; upload .bvh, .asf, .amc or a .zip of them",
+            "{}: unsupported file type; upload .bvh, .asf, .amc, .npz (a clip motionaug \
+             wrote) or a .zip of them",
             file.label
         ))
         .with_file(&file.label)),
@@ -290,26 +294,32 @@ pub fn parse_upload(
                     .map_err(|e| parse_failed(&file.label, e))?;
                 skeletons.push((file, skeleton));
             }
-            Kind::Bvh | Kind::Amc => motions.push(file),
+            Kind::Bvh | Kind::Amc | Kind::Npz => motions.push(file),
             Kind::Zip => unreachable!("zips were expanded"),
         }
     }
     if motions.is_empty() {
         return Err(ApiError::unprocessable(
-            "the upload holds no motion: add at least one .bvh or .amc file",
+            "the upload holds no motion: add at least one .bvh, .amc or .npz file",
         ));
     }
     let mut clips: Vec<ParsedClip> = Vec::with_capacity(motions.len());
     for file in motions {
-        let (format, motion, skeleton_file) = if kind_of(&file)? == Kind::Bvh {
-            let motion = clip::load_bvh(&file.label, &file.bytes)
-                .map_err(|e| parse_failed(&file.label, e))?;
-            (ClipFormat::Bvh, motion, None)
-        } else {
-            let (asf, skeleton) = pick_skeleton(&file, &skeletons)?;
-            let motion = clip::load_amc(&file.label, &file.bytes, skeleton)
-                .map_err(|e| parse_failed(&file.label, e))?;
-            (ClipFormat::Amc, motion, Some(asf))
+        let failed = |e| parse_failed(&file.label, e);
+        let (format, motion, skeleton_file) = match kind_of(&file)? {
+            Kind::Bvh => {
+                let motion = clip::load_bvh(&file.label, &file.bytes).map_err(failed)?;
+                (ClipFormat::Bvh, motion, None)
+            }
+            Kind::Npz => {
+                let motion = clip::load_npz(&file.label, &file.bytes).map_err(failed)?;
+                (ClipFormat::Npz, motion, None)
+            }
+            _ => {
+                let (asf, skeleton) = pick_skeleton(&file, &skeletons)?;
+                let motion = clip::load_amc(&file.label, &file.bytes, skeleton).map_err(failed)?;
+                (ClipFormat::Amc, motion, Some(asf))
+            }
         };
         if motion.frames() > limits.max_frames {
             return Err(ApiError::too_large(format!(
@@ -392,6 +402,7 @@ mod tests {
             bytes: vec![],
         };
         assert_eq!(kind_of(&f("A.BVH")).unwrap(), Kind::Bvh);
+        assert_eq!(kind_of(&f("walk__noise_000.npz")).unwrap(), Kind::Npz);
         assert!(kind_of(&f("notes.txt")).is_err());
     }
 

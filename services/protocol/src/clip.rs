@@ -4,7 +4,8 @@
 //! and workers parse the stored bytes again with the very same functions, so a
 //! clip that was accepted is read the same way everywhere. Options match the
 //! CLI's defaults: BVH units guessed from the body size (`Unit::Auto`), AMC clips
-//! at 120 Hz (the motion crate's `amc::DEFAULT_FPS`).
+//! at 120 Hz (the motion crate's `amc::DEFAULT_FPS`), NPZ clips as the motion
+//! crate reads the ones the product writes (`motion::npz::read_motion`).
 
 use motion::asf::Asf;
 use motion::{Motion, MotionError};
@@ -17,6 +18,11 @@ pub type LoadedSkeleton = Asf;
 /// Reads a BVH file; `label` names it in errors.
 pub fn load_bvh(label: &str, bytes: &[u8]) -> Result<Motion, MotionError> {
     motion::io::parse_bvh(bytes, label, motion::Unit::Auto)
+}
+
+/// Reads an NPZ clip the product wrote (lossless or float32).
+pub fn load_npz(label: &str, bytes: &[u8]) -> Result<Motion, MotionError> {
+    motion::npz::read_motion(bytes, label)
 }
 
 /// Reads an ASF skeleton.
@@ -33,7 +39,7 @@ pub fn load_amc(
     motion::io::parse_amc(bytes, label, skeleton, motion::amc::DEFAULT_FPS)
 }
 
-/// Reads a stored clip: `source` is the BVH or AMC file, `skeleton` the ASF for AMC.
+/// Reads a stored clip: `source` is the BVH, AMC or NPZ file, `skeleton` the ASF for AMC.
 pub fn load(
     format: ClipFormat,
     source_name: &str,
@@ -42,6 +48,7 @@ pub fn load(
 ) -> Result<Motion, MotionError> {
     match format {
         ClipFormat::Bvh => load_bvh(source_name, source),
+        ClipFormat::Npz => load_npz(source_name, source),
         ClipFormat::Amc => {
             let (skeleton_name, skeleton_bytes) = skeleton.ok_or_else(|| {
                 MotionError::InvalidMotion(format!(

@@ -143,6 +143,8 @@ pub enum ClipFormat {
     Bvh,
     /// An AMC motion with the ASF skeleton it was uploaded with.
     Amc,
+    /// A clip motionaug wrote as NPZ (lossless or float32), fed back in.
+    Npz,
 }
 
 /// Input of every job: one job of `pipeline::plan`, as planned at submission

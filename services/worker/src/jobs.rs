@@ -350,7 +350,7 @@ impl pipeline::Inputs for HttpInputs<'_> {
             ClipFormat::Amc => {
                 Some(self.get(&format!("/clips/{}/skeleton", clip.clip_id), "its skeleton")?)
             }
-            ClipFormat::Bvh => None,
+            ClipFormat::Bvh | ClipFormat::Npz => None,
         };
         let skeleton_name = clip.skeleton_name.clone().unwrap_or_default();
         let motion = motionaug_protocol::clip::load(

@@ -63,6 +63,9 @@ fn main() {
         ("class_tracker_on_two_workers", || {
             block_on(class_tracker_on_two_workers())
         }),
+        ("npz_and_static_root_clips", || {
+            block_on(npz_and_static_root_clips())
+        }),
     ];
     let started = Instant::now();
     let (mut passed, mut failed, mut filtered) = (0, 0, 0);
@@ -400,10 +403,27 @@ impl Cluster {
         clips: &[&str],
         recipe: &Value,
     ) -> anyhow::Result<String> {
+        let mut files = vec![(
+            "HDM_bd.asf".to_string(),
+            std::fs::read(examples().join("HDM_bd.asf"))?,
+        )];
+        for name in clips {
+            files.push((name.to_string(), std::fs::read(examples().join(name))?));
+        }
+        self.upload_files_and_augment(&files, clips.len(), recipe)
+            .await
+    }
+
+    /// Uploads `files` (name, bytes), which hold `clips` clips, and starts `recipe` on them.
+    async fn upload_files_and_augment(
+        &self,
+        files: &[(String, Vec<u8>)],
+        clips: usize,
+        recipe: &Value,
+    ) -> anyhow::Result<String> {
         let mut form = Form::new().text("name", "e2e");
-        for name in ["HDM_bd.asf"].iter().chain(clips) {
-            let bytes = std::fs::read(examples().join(name))?;
-            form = form.part("file", Part::bytes(bytes).file_name(name.to_string()));
+        for (name, bytes) in files {
+            form = form.part("file", Part::bytes(bytes.clone()).file_name(name.clone()));
         }
         let r = self
             .http
@@ -420,7 +440,7 @@ impl Cluster {
         );
         let dataset: Value = r.json().await?;
         ensure!(
-            dataset["clips"].as_array().map(Vec::len) == Some(clips.len()),
+            dataset["clips"].as_array().map(Vec::len) == Some(clips),
             "clips: {dataset}"
         );
         let r = self
@@ -617,19 +637,29 @@ impl Drop for Cluster {
 /// The example clips as `motionaug augment` reads them (named by file stem,
 /// `source` = the file name, as the service records uploads).
 fn local_clips(names: &[&str]) -> anyhow::Result<Vec<pipeline::Clip>> {
+    let mut files = Vec::new();
+    for name in names {
+        files.push((name.to_string(), std::fs::read(examples().join(name))?));
+    }
+    local_clips_of(&files)
+}
+
+/// The clips of `files` (name, bytes; AMC clips use the example ASF).
+fn local_clips_of(files: &[(String, Vec<u8>)]) -> anyhow::Result<Vec<pipeline::Clip>> {
     let asf = std::fs::read(examples().join("HDM_bd.asf"))?;
     let mut clips = Vec::new();
-    for name in names {
-        let bytes = std::fs::read(examples().join(name))?;
+    for (name, bytes) in files {
         let (format, skeleton) = if name.ends_with(".amc") {
             (
                 motionaug_protocol::ClipFormat::Amc,
                 Some(("HDM_bd.asf", asf.as_slice())),
             )
+        } else if name.ends_with(".npz") {
+            (motionaug_protocol::ClipFormat::Npz, None)
         } else {
             (motionaug_protocol::ClipFormat::Bvh, None)
         };
-        let motion = motionaug_protocol::clip::load(format, name, &bytes, skeleton)?;
+        let motion = motionaug_protocol::clip::load(format, name, bytes, skeleton)?;
         clips.push(pipeline::Clip {
             name: name.rsplit_once('.').unwrap().0.to_string(),
             source: name.to_string(),
@@ -642,9 +672,17 @@ fn local_clips(names: &[&str]) -> anyhow::Result<Vec<pipeline::Clip>> {
 /// Runs `recipe` on `clips` in this process with `pipeline::run`, the code of
 /// `motionaug augment`, writing into `out`. Returns the wall time.
 fn local_run(recipe: &Value, clips: &[&str], out: &Path) -> anyhow::Result<Duration> {
+    local_run_of(recipe, local_clips(clips)?, out)
+}
+
+/// [`local_run`] on clips already read.
+fn local_run_of(
+    recipe: &Value,
+    clips: Vec<pipeline::Clip>,
+    out: &Path,
+) -> anyhow::Result<Duration> {
     let recipe =
         motionaug_protocol::recipe::parse(recipe).map_err(|e| anyhow::anyhow!(e.message))?;
-    let clips = local_clips(clips)?;
     let started = Instant::now();
     let summary = pipeline::run(
         &recipe,
@@ -1163,6 +1201,65 @@ async fn worker_killed_mid_correction() -> anyhow::Result<()> {
             );
             let got = download(&c, &aug).await?;
             ensure!(got.len() == 4, "results: {:?}", got.keys());
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// Clips motionaug wrote as NPZ (its float32 output and the lossless form)
+/// and a BVH with a static root above the travelling Hips go through the
+/// service as through the CLI: one worker reads them with the same reader
+/// and the results equal a local run byte for byte.
+async fn npz_and_static_root_clips() -> anyhow::Result<()> {
+    let layered = std::fs::read(examples().join("static_root_walk.bvh"))?;
+    let walk = motion::io::parse_bvh(&layered, "walk.bvh", motion::Unit::Auto)?;
+    let files = vec![
+        ("static_root_walk.bvh".to_string(), layered),
+        (
+            "walk_f32.npz".to_string(),
+            motion::npz::motion_to_bytes(&walk, &[])?,
+        ),
+        (
+            "walk_exact.npz".to_string(),
+            pipeline::encode_clip(&walk, None)?,
+        ),
+    ];
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            let aug = c.upload_files_and_augment(&files, 3, &recipe()).await?;
+            c.wait_for(&aug, "succeeded", Duration::from_secs(120))
+                .await?;
+            check_jobs(&c, &[("synthesize", 3)]).await?;
+            let got = download(&c, &aug).await?;
+            let out = c.dir.join("local");
+            std::fs::create_dir_all(&out)?;
+            local_run_of(&recipe(), local_clips_of(&files)?, &out)?;
+            let mut expected = 0;
+            for entry in std::fs::read_dir(&out)? {
+                let path = entry?.path();
+                if !path.is_file() {
+                    continue;
+                }
+                let name = path.file_name().unwrap().to_string_lossy().to_string();
+                let ours = got.get(&name).with_context(|| format!("{name} missing"))?;
+                ensure!(
+                    *ours == std::fs::read(&path)?,
+                    "{name} differs from a local run"
+                );
+                expected += 1;
+            }
+            ensure!(
+                got.len() == expected,
+                "{} files, expected {expected}",
+                got.len()
+            );
+            // The static root is written back above the Hips in every output.
+            let mirrored = &got["static_root_walk__02_mirror_000.bvh"];
+            ensure!(mirrored.starts_with(b"HIERARCHY\nROOT joint_Root\n"));
             Ok(())
         }
         .await;

@@ -24,7 +24,7 @@ use crate::progress;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Input clips (BVH, or AMC with --skeleton).
+    /// Input clips (BVH, AMC with --skeleton, or NPZ written by motionaug).
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
     #[command(flatten)]

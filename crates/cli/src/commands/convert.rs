@@ -8,7 +8,7 @@ use crate::input::ClipArgs;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Input clip (BVH, or AMC with --skeleton).
+    /// Input clip (BVH, AMC with --skeleton, or NPZ written by motionaug).
     input: PathBuf,
     /// Output file: `.bvh` or `.npz`.
     output: PathBuf,

@@ -12,7 +12,7 @@ use crate::input::{ClipArgs, clip_name};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The clip to correct (BVH, or AMC with --skeleton).
+    /// The clip to correct (BVH, AMC with --skeleton, or NPZ written by motionaug).
     input: PathBuf,
     #[command(flatten)]
     clip: ClipArgs,

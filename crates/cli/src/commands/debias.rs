@@ -103,10 +103,12 @@ fn onto(corrected: Motion, original: &Motion, path: &Path) -> anyhow::Result<Mot
             b.len()
         );
     }
-    Ok(original.with_frames(
+    // The simulated character has rigid bones: no translation tracks.
+    Ok(original.with_frames_and_tracks(
         corrected.fps(),
         corrected.root_translation().to_vec(),
         corrected.rotations().to_vec(),
+        Vec::new(),
     )?)
 }
 

@@ -10,11 +10,12 @@ use crate::output::print_stdout;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// A BVH or AMC clip (AMC needs --skeleton).
+    /// A BVH, AMC (needs --skeleton) or NPZ clip (one motionaug wrote).
     file: PathBuf,
     #[command(flatten)]
     clip: ClipArgs,
-    /// Print JSON: frames, fps, duration_s, joints, joint_names.
+    /// Print JSON: frames, fps, duration_s, joints, joint_names, rest_height_m,
+    /// base_joints, translation_tracks.
     #[arg(long)]
     json: bool,
 }
@@ -28,6 +29,11 @@ struct Summary {
     joint_names: Vec<String>,
     /// Height of the rest pose, metres.
     rest_height_m: f64,
+    /// Static joints the file has above the root (folded into the skeleton's
+    /// base: the root is the joint that carries the travel), outermost first.
+    base_joints: Vec<String>,
+    /// Joints whose translation the clip animates (besides the root).
+    translation_tracks: Vec<String>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -40,6 +46,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         joints: motion.joints(),
         joint_names: skeleton.joints().iter().map(|j| j.name.clone()).collect(),
         rest_height_m: skeleton.rest_height(),
+        base_joints: skeleton.base().iter().map(|b| b.name.clone()).collect(),
+        translation_tracks: (0..motion.joints())
+            .filter(|&j| motion.track(j).is_some())
+            .map(|j| skeleton.joint(j).name.clone())
+            .collect(),
     };
     let mut text = String::new();
     if args.json {
@@ -50,13 +61,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         writeln!(text, "fps:         {}", summary.fps)?;
         writeln!(text, "duration:    {:.3} s", summary.duration_s)?;
         writeln!(text, "rest height: {:.3} m", summary.rest_height_m)?;
+        if !summary.base_joints.is_empty() {
+            writeln!(
+                text,
+                "static base: {} (above the root, which carries the travel)",
+                summary.base_joints.join(", ")
+            )?;
+        }
         writeln!(text, "joints:      {}", summary.joints)?;
         for (i, joint) in skeleton.joints().iter().enumerate() {
             let parent = joint
                 .parent
                 .map(|p| skeleton.joint(p).name.as_str())
                 .unwrap_or("-");
-            writeln!(text, "  {i:3} {:<24} parent {parent}", joint.name)?;
+            let track = if motion.track(i).is_some() {
+                "  (animated translation)"
+            } else {
+                ""
+            };
+            writeln!(text, "  {i:3} {:<24} parent {parent}{track}", joint.name)?;
         }
     }
     print_stdout(&text)

@@ -7,7 +7,7 @@ use crate::output::print_stdout;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// A BVH or AMC clip (AMC needs --skeleton).
+    /// A BVH, AMC (needs --skeleton) or NPZ clip (one motionaug wrote).
     file: PathBuf,
     #[command(flatten)]
     clip: ClipArgs,

@@ -30,7 +30,7 @@ enum Command {
 
 #[derive(clap::Args)]
 struct TrainArgs {
-    /// Training clips (BVH, or AMC with --skeleton), one action class.
+    /// Training clips (BVH, AMC with --skeleton, or NPZ), one action class.
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
     #[command(flatten)]

@@ -1,16 +1,20 @@
 //! From the raw hierarchy and frame values to a [`Motion`]: each joint's
-//! channel columns, non-root position channels folded into the offsets (the
-//! module docs of [`crate::bvh`] say when that is allowed), the length unit
-//! and skeleton, then the root translation and local rotations of every frame.
+//! channel columns, non-root position channels read as translations
+//! ([`super::translation`]: constant ones become the joint's offset, varying
+//! ones a translation track), the length unit and skeleton, the root
+//! translation and local rotations of every frame, and last the static joints
+//! above a travelling joint folded into the skeleton's base ([`super::base`]).
 
 use std::sync::Arc;
 
 use glam::{DQuat, DVec3};
 
+use super::base;
 use super::frames::Values;
 use super::hierarchy::RawJoint;
+use super::translation;
 use crate::error::{MotionError, ParseError};
-use crate::motion::Motion;
+use crate::motion::{Motion, Tracks};
 use crate::rotation;
 use crate::skeleton::{Axis, Channel, Joint, Skeleton};
 use crate::text::Errors;
@@ -25,11 +29,31 @@ pub(super) fn motion(
     errors: &Errors,
 ) -> Result<Motion, MotionError> {
     let first_column = first_columns(raw);
-    let offsets = still_offsets(raw, values, &first_column, errors)?;
-    let (skeleton, scale) = skeleton(raw, &offsets, unit, errors)?;
+    let still = still_joints(raw, values, &first_column);
+    let (offsets, file_tracks) = translations(raw, values, &first_column);
+    let parents: Vec<Option<usize>> = raw.iter().map(|j| j.parent).collect();
+    let tracked: Vec<bool> = file_tracks.iter().map(Option::is_some).collect();
+    let chain = base::static_chain(&parents, &still, &tracked);
+    // The body's size for the unit guess leaves the static joints out.
+    let body: Vec<bool> = (0..raw.len())
+        .map(|j| chain.as_ref().is_none_or(|(_, c)| !c.contains(&j)))
+        .collect();
+    let (skeleton, scale) = skeleton(raw, &offsets, &body, unit, errors)?;
     let (root_translation, rotations) = poses(raw, values, &first_column, &offsets, scale);
-    Motion::new(skeleton, frame_rate, root_translation, rotations)
-        .map_err(|e| errors.whole(e.to_string()).into())
+    let tracks: Tracks = file_tracks
+        .into_iter()
+        .map(|t| t.map(|t| t.into_iter().map(|p| p * scale).collect()))
+        .collect();
+    let whole = |e: MotionError| -> MotionError { errors.whole(e.to_string()).into() };
+    let motion = Motion::new(skeleton, frame_rate, root_translation, rotations)
+        .and_then(|m| m.with_tracks(tracks))
+        .map_err(whole)?;
+    match chain {
+        Some((travelling, chain)) => {
+            base::fold_static_base(motion, travelling, &chain).map_err(whole)
+        }
+        None => Ok(motion),
+    }
 }
 
 /// First column of each joint's channels.
@@ -43,70 +67,91 @@ fn first_columns(raw: &[RawJoint]) -> Vec<usize> {
     first_column
 }
 
-/// Each joint's offset (file units), with non-root position channels folded
-/// in when they hold still: channels that repeat the offset are the offset,
-/// constant ones are added to it, varying ones are an error.
-fn still_offsets(
+/// Whether two values of one channel are the same up to the rounding of the text.
+fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-6 * (1.0 + a.abs().max(b.abs()))
+}
+
+/// Whether channel column `c` holds one value over the clip.
+fn constant_column(values: &Values, c: usize) -> bool {
+    let first = values.at(0, c);
+    (1..values.frames).all(|f| same(values.at(f, c), first))
+}
+
+/// Per joint: whether every one of its channels holds still over the clip.
+fn still_joints(raw: &[RawJoint], values: &Values, first_column: &[usize]) -> Vec<bool> {
+    raw.iter()
+        .zip(first_column)
+        .map(|(j, &c0)| (c0..c0 + j.channels.len()).all(|c| constant_column(values, c)))
+        .collect()
+}
+
+/// Each joint's offset (file units) and, for joints whose position channels
+/// vary, its local translation per frame (file units). The root keeps its
+/// `OFFSET` (its position channels are the root translation, see [`poses`]);
+/// other joints' position channels are read by [`translation::reads_absolute`]:
+/// constant ones become the offset, varying ones a track (the offset stays the
+/// file's `OFFSET`, the rest pose).
+fn translations(
     raw: &[RawJoint],
     values: &Values,
     first_column: &[usize],
-    errors: &Errors,
-) -> Result<Vec<DVec3>, ParseError> {
-    let value = |f: usize, c: usize| values.at(f, c);
+) -> (Vec<DVec3>, Vec<Option<Vec<DVec3>>>) {
     let mut offsets: Vec<DVec3> = raw
         .iter()
         .map(|j| j.offset.unwrap_or(DVec3::ZERO))
         .collect();
+    let mut tracks: Vec<Option<Vec<DVec3>>> = vec![None; raw.len()];
     for (ji, j) in raw.iter().enumerate().skip(1) {
-        let mut absolute = true;
-        let mut constant = true;
-        let mut spread: f64 = 0.0;
-        let mut any = false;
-        for (k, c) in j.channels.iter().enumerate() {
-            if let Channel::Position(axis) = c {
-                any = true;
-                let base = offsets[ji][axis.index()];
-                let first = value(0, first_column[ji] + k);
-                for f in 0..values.frames {
-                    let v = value(f, first_column[ji] + k);
-                    let tol = 1e-6 * (1.0 + v.abs());
-                    if (v - base).abs() > tol {
-                        absolute = false;
-                    }
-                    if (v - first).abs() > tol {
-                        constant = false;
-                    }
-                    spread = spread.max((v - first).abs());
-                }
-            }
-        }
-        if !any || absolute {
+        let columns: Vec<(usize, usize)> = j
+            .channels
+            .iter()
+            .enumerate()
+            .filter_map(|(k, c)| match c {
+                Channel::Position(axis) => Some((axis.index(), first_column[ji] + k)),
+                Channel::Rotation(_) => None,
+            })
+            .collect();
+        if columns.is_empty() {
             continue;
         }
-        if !constant {
-            return Err(errors.at(
-                j.channels_line,
-                format!(
-                    "joint `{}` has animated position channels (they vary by up to {spread} \
-                     file units); only the root's position can be animated",
-                    j.name
-                ),
-            ));
-        }
-        for (k, c) in j.channels.iter().enumerate() {
-            if let Channel::Position(axis) = c {
-                offsets[ji][axis.index()] += value(0, first_column[ji] + k);
-            }
+        let offset = offsets[ji];
+        let raw_values: Vec<DVec3> = (0..values.frames)
+            .map(|f| {
+                let mut v = DVec3::ZERO;
+                for &(axis, c) in &columns {
+                    v[axis] = values.at(f, c);
+                }
+                v
+            })
+            .collect();
+        let axes: Vec<usize> = columns.iter().map(|&(axis, _)| axis).collect();
+        let absolute = translation::reads_absolute(&raw_values, offset, &axes);
+        let local: Vec<DVec3> = raw_values
+            .iter()
+            .map(|v| {
+                let mut p = offset;
+                for &a in &axes {
+                    p[a] = if absolute { v[a] } else { offset[a] + v[a] };
+                }
+                p
+            })
+            .collect();
+        if columns.iter().all(|&(_, c)| constant_column(values, c)) {
+            offsets[ji] = local[0];
+        } else {
+            tracks[ji] = Some(local);
         }
     }
-    Ok(offsets)
+    (offsets, tracks)
 }
 
 /// The skeleton in metres and the metres per file unit: `unit`, or guessed
-/// from the rest pose in file units.
+/// from the rest pose in file units of the joints in `body`.
 fn skeleton(
     raw: &[RawJoint],
     offsets: &[DVec3],
+    body: &[bool],
     unit: Unit,
     errors: &Errors,
 ) -> Result<(Arc<Skeleton>, f64), ParseError> {
@@ -129,7 +174,7 @@ fn skeleton(
         Some(m) => m,
         None => {
             let in_file_units = file_skeleton(1.0).map_err(|e| errors.whole(e.to_string()))?;
-            units::guess_unit(units::rest_size(&in_file_units))
+            units::guess_unit(units::rest_size_of(&in_file_units, |j| body[j]))
                 .metres()
                 .unwrap_or(1.0)
         }

@@ -110,10 +110,10 @@ fn clip_ref((clip_id, clip_name, format, source_name, skeleton_name): &ClipRow) 
         clip_name: clip_name.clone(),
         source_name: source_name.clone(),
         skeleton_name: skeleton_name.clone(),
-        format: if format == "amc" {
-            ClipFormat::Amc
-        } else {
-            ClipFormat::Bvh
+        format: match format.as_str() {
+            "amc" => ClipFormat::Amc,
+            "npz" => ClipFormat::Npz,
+            _ => ClipFormat::Bvh,
         },
     }
 }

@@ -217,6 +217,7 @@ pub async fn create(
         .bind(match clip.format {
             motionaug_protocol::ClipFormat::Bvh => "bvh",
             motionaug_protocol::ClipFormat::Amc => "amc",
+            motionaug_protocol::ClipFormat::Npz => "npz",
         })
         .bind(&clip.source_name)
         .bind(&clip.source)

@@ -363,3 +363,60 @@ async fn unsafe_names_are_refused_naming_them() {
     assert_eq!(body["clips"][0]["name"], "run-1.v2");
     app.cleanup().await;
 }
+
+/// Clips motionaug wrote as NPZ (the float32 output and the pipeline's
+/// lossless form) upload like BVH, and so does the layout with a static root
+/// above the travelling Hips; a file that is no clip is named.
+#[tokio::test]
+async fn npz_clips_and_a_static_root_layout_upload() {
+    let app = spawn_app(&[]).await;
+    let layered = example("static_root_walk.bvh");
+    let walk = motion::io::parse_bvh(&layered, "w.bvh", motion::Unit::Auto).unwrap();
+    let f32s = motion::npz::motion_to_bytes(&walk, &[]).unwrap();
+    let exact = pipeline::encode_clip(&walk, None).unwrap();
+    let r = app
+        .upload(
+            &app.key,
+            &[
+                ("static_root_walk.bvh", layered),
+                ("walk_f32.npz", f32s.clone()),
+                ("set.zip", zip_of(&[("dir/walk_exact.npz", exact)])),
+            ],
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::CREATED);
+    let body: Value = r.json().await.unwrap();
+    let clips = body["clips"].as_array().unwrap();
+    let names: Vec<&str> = clips.iter().map(|c| c["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["static_root_walk", "walk_f32", "walk_exact"]);
+    for c in clips {
+        assert_eq!(
+            (c["frames"].as_u64(), c["joints"].as_u64()),
+            (Some(180), Some(31))
+        );
+        assert_eq!(c["fps"], 60.0);
+    }
+    let formats: Vec<String> = sqlx::query_scalar("SELECT format FROM clips ORDER BY position")
+        .fetch_all(&app.db)
+        .await
+        .unwrap();
+    assert_eq!(formats, ["bvh", "npz", "npz"]);
+    let names: Vec<Value> = sqlx::query_scalar("SELECT joint_names FROM clips ORDER BY position")
+        .fetch_all(&app.db)
+        .await
+        .unwrap();
+    assert!(names.iter().all(|n| n[0] == "Hips"), "{names:?}");
+    // Not a clip: refused, naming the file.
+    let mut broken = f32s;
+    broken.truncate(broken.len() / 2);
+    let r = app.upload(&app.key, &[("broken.npz", broken)]).await;
+    let (status, body) = problem(r).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(body["file"], "broken.npz");
+    assert!(
+        body["detail"].as_str().unwrap().contains("broken.npz"),
+        "{body}"
+    );
+    assert_eq!(app.dataset_count().await, 1);
+    app.cleanup().await;
+}
