@@ -515,83 +515,147 @@ pub fn exact_to_bytes(motion: &Motion, extras: &[NpyArray]) -> std::io::Result<V
     Ok(w.finish()?.into_inner())
 }
 
-/// A clip from the arrays of an archive the product wrote: the lossless kind
-/// (with `skeleton_json`) or the float32 kind (with `parents`, `offsets` and
-/// `joint_names`); `label` names the file in errors.
-pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, MotionError> {
-    let bad = |message: String| -> MotionError {
+/// The arrays of one archive, read as a clip; errors name the file.
+struct Arrays<'a> {
+    arrays: &'a [NpyArray],
+    label: &'a Path,
+}
+
+impl<'a> Arrays<'a> {
+    fn bad(&self, message: String) -> MotionError {
         ParseError {
-            file: label.to_path_buf(),
+            file: self.label.to_path_buf(),
             line: None,
             message,
         }
         .into()
-    };
-    let find = |name: &str| arrays.iter().find(|a| a.name == name);
-    let need = |name: &str| {
-        find(name).ok_or_else(|| {
-            bad(format!(
+    }
+
+    fn find(&self, name: &str) -> Option<&'a NpyArray> {
+        self.arrays.iter().find(|a| a.name == name)
+    }
+
+    fn need(&self, name: &str) -> Result<&'a NpyArray, MotionError> {
+        self.find(name).ok_or_else(|| {
+            self.bad(format!(
                 "no array `{name}`: not a clip written by motionaug (an NPZ clip has \
                  `root_translation`, `rotations`, `fps` and `skeleton_json` or \
                  `parents`, `offsets` and `joint_names`)"
             ))
         })
-    };
-    // float32 or float64 values of an array, with the shape it must have.
-    let floats = |name: &str, shape: &[usize]| -> Result<Vec<f64>, MotionError> {
-        let a = need(name)?;
+    }
+
+    /// float32 or float64 values of an array, which must have `shape`.
+    fn floats(&self, name: &str, shape: &[usize]) -> Result<Vec<f64>, MotionError> {
+        let a = self.need(name)?;
         if a.shape != shape {
-            return Err(bad(format!(
+            return Err(self.bad(format!(
                 "array `{name}` has shape {:?}, expected {shape:?}",
                 a.shape
             )));
         }
         a.to_f64()
             .or_else(|| a.to_f32().map(|v| v.into_iter().map(f64::from).collect()))
-            .ok_or_else(|| bad(format!("array `{name}` is {:?}, not float", a.dtype)))
-    };
-    let rotations_shape = need("rotations")?.shape.clone();
+            .ok_or_else(|| self.bad(format!("array `{name}` is {:?}, not float", a.dtype)))
+    }
+
+    /// Vectors of 3 values from an array of shape `[.., 3]`.
+    fn vectors(&self, name: &str, shape: &[usize]) -> Result<Vec<DVec3>, MotionError> {
+        Ok(self
+            .floats(name, shape)?
+            .chunks_exact(3)
+            .map(|p| DVec3::new(p[0], p[1], p[2]))
+            .collect())
+    }
+
+    /// The skeleton of the lossless kind: `skeleton_json`.
+    fn skeleton_json(&self, json: &NpyArray) -> Result<Skeleton, MotionError> {
+        let bytes = json
+            .to_u8()
+            .ok_or_else(|| self.bad("array `skeleton_json` is not uint8".into()))?;
+        let s: Skeleton = serde_json::from_slice(&bytes)
+            .map_err(|e| self.bad(format!("array `skeleton_json`: {e}")))?;
+        s.validated().map_err(|e| self.bad(e.to_string()))
+    }
+
+    /// The skeleton of the float32 kind: `joint_names`, `parents`, `offsets`,
+    /// `end_sites` when there (metres; the source unit is the metre).
+    fn skeleton_arrays(&self, j: usize) -> Result<Skeleton, MotionError> {
+        let names = self
+            .need("joint_names")?
+            .to_strings()
+            .ok_or_else(|| self.bad("array `joint_names` is not a string array".into()))?;
+        let parents = self
+            .need("parents")?
+            .to_i32()
+            .ok_or_else(|| self.bad("array `parents` is not int32".into()))?;
+        let offsets = self.vectors("offsets", &[j, 3])?;
+        // End sites came later: an archive without them has none.
+        let end_sites = match self.find("end_sites") {
+            Some(_) => self.vectors("end_sites", &[j, 3])?,
+            None => vec![DVec3::NAN; j],
+        };
+        if names.len() != j || parents.len() != j {
+            return Err(self.bad(format!(
+                "{} joint names and {} parents for {j} joints",
+                names.len(),
+                parents.len()
+            )));
+        }
+        let joints = (0..j)
+            .map(|k| {
+                let parent = match parents[k] {
+                    -1 => None,
+                    p if p >= 0 => Some(p as usize),
+                    p => return Err(self.bad(format!("joint {k} has parent {p}"))),
+                };
+                Ok(Joint {
+                    name: names[k].clone(),
+                    parent,
+                    offset: offsets[k],
+                    channels: Vec::new(),
+                    end_site: Some(end_sites[k]).filter(|e| !e.is_nan()),
+                    limits: None,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Skeleton::new(joints, 1.0).map_err(|e| self.bad(e.to_string()))
+    }
+}
+
+/// A clip from the arrays of an archive the product wrote: the lossless kind
+/// (with `skeleton_json`) or the float32 kind (with `parents`, `offsets` and
+/// `joint_names`); `label` names the file in errors.
+pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, MotionError> {
+    let a = Arrays { arrays, label };
+    let rotations_shape = a.need("rotations")?.shape.clone();
     let [t, j, 4] = rotations_shape[..] else {
-        return Err(bad(format!(
+        return Err(a.bad(format!(
             "array `rotations` has shape {rotations_shape:?}, expected [frames, joints, 4]"
         )));
     };
-    let skeleton = match find("skeleton_json") {
-        Some(json) => {
-            let bytes = json
-                .to_u8()
-                .ok_or_else(|| bad("array `skeleton_json` is not uint8".into()))?;
-            let s: Skeleton = serde_json::from_slice(&bytes)
-                .map_err(|e| bad(format!("array `skeleton_json`: {e}")))?;
-            s.validated().map_err(|e| bad(e.to_string()))?
-        }
-        None => skeleton_from_arrays(&need, &floats, j).map_err(|e| match e {
-            MotionError::Parse(p) => MotionError::Parse(p),
-            e => bad(e.to_string()),
-        })?,
+    let exact = a.find("skeleton_json");
+    let skeleton = match exact {
+        Some(json) => a.skeleton_json(json)?,
+        None => a.skeleton_arrays(j)?,
     };
     if skeleton.len() != j {
-        return Err(bad(format!(
+        return Err(a.bad(format!(
             "`rotations` has {j} joints, the skeleton {}",
             skeleton.len()
         )));
     }
-    let fps = floats("fps", &[])?[0];
-    let root: Vec<DVec3> = floats("root_translation", &[t, 3])?
-        .chunks_exact(3)
-        .map(|p| DVec3::new(p[0], p[1], p[2]))
-        .collect();
-    let rot: Vec<DQuat> = floats("rotations", &[t, j, 4])?
+    let fps = a.floats("fps", &[])?[0];
+    let root = a.vectors("root_translation", &[t, 3])?;
+    let rot: Vec<DQuat> = a
+        .floats("rotations", &[t, j, 4])?
         .chunks_exact(4)
         .map(|q| DQuat::from_xyzw(q[1], q[2], q[3], q[0]))
         .collect();
-    let tracks: Tracks = match find("translations") {
+    let tracks: Tracks = match a.find("translations") {
         None => Vec::new(),
         Some(_) => {
-            let rows: Vec<DVec3> = floats("translations", &[t, j, 3])?
-                .chunks_exact(3)
-                .map(|p| DVec3::new(p[0], p[1], p[2]))
-                .collect();
+            let rows = a.vectors("translations", &[t, j, 3])?;
             (0..j)
                 .map(|k| {
                     let track: Vec<DVec3> = (0..t).map(|f| rows[f * j + k]).collect();
@@ -604,11 +668,10 @@ pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, M
                 .collect()
         }
     };
-    let exact = find("skeleton_json").is_some();
     let mut motion = Motion::new(std::sync::Arc::new(skeleton), fps, root, rot.clone())
         .and_then(|m| m.with_tracks(tracks))
-        .map_err(|e| bad(e.to_string()))?;
-    if exact {
+        .map_err(|e| a.bad(e.to_string()))?;
+    if exact.is_some() {
         // `Motion::new` renormalises the quaternions, which can move their
         // last bit; put back the exact values it validated.
         for frame in 0..t {
@@ -618,54 +681,6 @@ pub fn motion_from_arrays(arrays: &[NpyArray], label: &Path) -> Result<Motion, M
         }
     }
     Ok(motion)
-}
-
-/// The skeleton of a float32 archive: `joint_names`, `parents`, `offsets`
-/// (metres; the source unit is the metre).
-fn skeleton_from_arrays<'a>(
-    need: &dyn Fn(&str) -> Result<&'a NpyArray, MotionError>,
-    floats: &dyn Fn(&str, &[usize]) -> Result<Vec<f64>, MotionError>,
-    j: usize,
-) -> Result<Skeleton, MotionError> {
-    let invalid = |m: String| MotionError::InvalidSkeleton(m);
-    let names = need("joint_names")?
-        .to_strings()
-        .ok_or_else(|| invalid("array `joint_names` is not a string array".into()))?;
-    let parents = need("parents")?
-        .to_i32()
-        .ok_or_else(|| invalid("array `parents` is not int32".into()))?;
-    let offsets = floats("offsets", &[j, 3])?;
-    // End sites came later: an archive without them has none.
-    let end_sites = match need("end_sites") {
-        Ok(_) => floats("end_sites", &[j, 3])?,
-        Err(_) => vec![f64::NAN; 3 * j],
-    };
-    if names.len() != j || parents.len() != j {
-        return Err(invalid(format!(
-            "{} joint names and {} parents for {j} joints",
-            names.len(),
-            parents.len()
-        )));
-    }
-    let joints = (0..j)
-        .map(|k| {
-            let parent = match parents[k] {
-                -1 => None,
-                p if p >= 0 => Some(p as usize),
-                p => return Err(invalid(format!("joint {k} has parent {p}"))),
-            };
-            Ok(Joint {
-                name: names[k].clone(),
-                parent,
-                offset: DVec3::new(offsets[3 * k], offsets[3 * k + 1], offsets[3 * k + 2]),
-                channels: Vec::new(),
-                end_site: Some(DVec3::from_slice(&end_sites[3 * k..3 * k + 3]))
-                    .filter(|e| !e.is_nan()),
-                limits: None,
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    Skeleton::new(joints, 1.0)
 }
 
 /// A clip from `.npz` bytes the product wrote (see [`motion_from_arrays`]).

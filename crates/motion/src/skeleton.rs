@@ -173,7 +173,7 @@ impl Skeleton {
                 && b.translation.is_finite()
                 && b.end_site.is_none_or(|e| e.is_finite());
             let n = b.rotation.length();
-            if !finite || !(n.is_finite() && n > 1e-9) {
+            if !(finite && n.is_finite() && n > 1e-9) {
                 return bad(format!("base joint `{}` has a non-finite value", b.name));
             }
             if (n - 1.0).abs() > 1e-12 {

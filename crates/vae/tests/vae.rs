@@ -259,7 +259,7 @@ fn a_static_root_above_the_hips_trains_and_samples_as_the_walk() {
     for (x, y) in a.iter().zip(&b) {
         assert!((x - y).abs() < 1e-4, "{x} vs {y}");
     }
-    let model = vae::train(&[layered.clone()], &tiny_config(4), |_| {}).unwrap();
+    let model = vae::train(std::slice::from_ref(&layered), &tiny_config(4), |_| {}).unwrap();
     let saved = tempfile::tempdir().unwrap();
     model.save(saved.path()).unwrap();
     let loaded = TrainedVae::load(saved.path()).unwrap();
