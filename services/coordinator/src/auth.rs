@@ -35,9 +35,12 @@ pub const KEY_CACHE_TTL: Duration = Duration::from_secs(10);
 /// Keys remembered at most (the cache is emptied when full).
 const KEY_CACHE_SIZE: usize = 10_000;
 
-/// Recently looked-up keys: key hash -> tenant and when it was looked up.
+/// Key hash -> the tenant and when it was looked up.
+type KeyMap = HashMap<Vec<u8>, (Tenant, Instant)>;
+
+/// Recently looked-up keys.
 #[derive(Debug, Clone, Default)]
-pub struct KeyCache(Arc<Mutex<HashMap<Vec<u8>, (Tenant, Instant)>>>);
+pub struct KeyCache(Arc<Mutex<KeyMap>>);
 
 impl KeyCache {
     fn get(&self, hash: &[u8]) -> Option<Tenant> {

@@ -64,9 +64,11 @@ pub fn spec_path(route: &str) -> String {
     route.replace("{*", "{")
 }
 
-/// The document the router collected, with its paths written the OpenAPI way
-/// and a 400 problem on every operation that reads a path, a query or a body
-/// (what the router answers when one of them cannot be read).
+/// The document the router collected, with its paths written the OpenAPI way,
+/// a 400 problem on every operation that reads a path, a query or a body
+/// (what the router answers when one of them cannot be read), and 415 and 422
+/// problems on every operation with a JSON body (no JSON content type; JSON
+/// that does not match the body's type).
 pub fn finish(mut api: utoipa::openapi::OpenApi) -> utoipa::openapi::OpenApi {
     api.paths.paths = std::mem::take(&mut api.paths.paths)
         .into_iter()
@@ -83,10 +85,19 @@ pub fn finish(mut api: utoipa::openapi::OpenApi) -> utoipa::openapi::OpenApi {
             {
                 let reads_input = op.request_body.is_some()
                     || op.parameters.as_ref().is_some_and(|p| !p.is_empty());
-                if reads_input {
+                let json_body = matches!(
+                    &op.request_body,
+                    Some(RefOr::T(body)) if body.content.contains_key("application/json")
+                );
+                let statuses: &[&str] = match (reads_input, json_body) {
+                    (_, true) => &["400", "415", "422"],
+                    (true, false) => &["400"],
+                    (false, false) => &[],
+                };
+                for status in statuses {
                     op.responses
                         .responses
-                        .entry("400".to_string())
+                        .entry(status.to_string())
                         .or_insert_with(|| Ref::from_response_name("Problem").into());
                 }
             }
