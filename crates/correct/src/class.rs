@@ -98,14 +98,7 @@ pub struct ClassReport {
 
 impl ClassReport {
     pub fn read(path: &Path) -> Result<ClassReport, CorrectError> {
-        let bytes = std::fs::read(path).map_err(|source| CorrectError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        serde_json::from_slice(&bytes).map_err(|e| CorrectError::BadReport {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
+        crate::report::read_json(path)
     }
 
     pub fn accepted(&self) -> usize {

@@ -64,6 +64,18 @@ pub struct Report {
     pub soles_flat_before: Option<f64>,
 }
 
+/// A JSON file a correction wrote (`report.json`, a tracker's `class.json`).
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CorrectError> {
+    let bytes = std::fs::read(path).map_err(|source| CorrectError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_slice(&bytes).map_err(|e| CorrectError::BadReport {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
 fn one() -> f64 {
     1.0
 }
@@ -71,14 +83,7 @@ fn one() -> f64 {
 impl Report {
     /// A `report.json` as a finished correction wrote it.
     pub fn read(path: &Path) -> Result<Report, CorrectError> {
-        let bytes = std::fs::read(path).map_err(|source| CorrectError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        serde_json::from_slice(&bytes).map_err(|e| CorrectError::BadReport {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
+        read_json(path)
     }
 }
 
