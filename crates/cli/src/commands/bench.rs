@@ -257,7 +257,10 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
             );
             reports.push(r);
         }
-        rows.push(correct::summary::ClassSummary::of(class, &reports));
+        // `--per-class 0` trains the tracker only: no row of nothing.
+        if !reports.is_empty() {
+            rows.push(correct::summary::ClassSummary::of(class, &reports));
+        }
         let md = correct::summary::to_markdown(&rows);
         crate::output::write_atomic(&args.out.join("table.md"), md.as_bytes())?;
         crate::output::write_json(&args.out.join("table.json"), &rows)?;
