@@ -17,11 +17,10 @@
 //! `class.json` keeps the verdict per clip and the curve of accepted clips.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
 
 use motion::Motion;
 use physics::ImitationEnv;
-use ppo::{Control, RunLimits, StopReason, Trainer};
+use ppo::{Control, StopReason, Trainer};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -180,15 +179,8 @@ pub fn train_class(
 
     let schedule = cc.residual_schedule;
     schedule.apply(&mut trainer);
-    let limits = RunLimits {
-        time_budget_s: Some(cc.time_budget_s),
-        max_iterations: cc.max_iterations,
-        max_samples: cc.max_samples,
-        checkpoint_dir: Some(checkpoints.clone()),
-        checkpoint_every_s: cc.checkpoint_every_s,
-        keep_checkpoints: 2,
-    };
-    let stop_requested = || cc.stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed));
+    let limits = cc.run_limits(&checkpoints);
+    let stop_requested = || cc.stop_requested();
     let mut curve = Vec::new();
     let mut verdicts = Vec::new();
     let mut failure = None;

@@ -94,6 +94,25 @@ impl Default for CorrectConfig {
 }
 
 impl CorrectConfig {
+    /// The trainer's limits: this budget, checkpoints into `checkpoints`.
+    pub(crate) fn run_limits(&self, checkpoints: &Path) -> RunLimits {
+        RunLimits {
+            time_budget_s: Some(self.time_budget_s),
+            max_iterations: self.max_iterations,
+            max_samples: self.max_samples,
+            checkpoint_dir: Some(checkpoints.to_path_buf()),
+            checkpoint_every_s: self.checkpoint_every_s,
+            keep_checkpoints: 2,
+        }
+    }
+
+    /// Whether another thread asked training to stop ([`CorrectConfig::stop`]).
+    pub(crate) fn stop_requested(&self) -> bool {
+        self.stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+    }
+
     pub fn validate(&self) -> Result<(), CorrectError> {
         let bad = |m: String| Err(CorrectError::Config(m));
         if self.envs == 0 {
@@ -342,22 +361,10 @@ fn train(
 ) -> Result<(StopReason, Option<Rollout>), CorrectError> {
     let schedule = config.residual_schedule;
     schedule.apply(trainer);
-    let limits = RunLimits {
-        time_budget_s: Some(config.time_budget_s),
-        max_iterations: config.max_iterations,
-        max_samples: config.max_samples,
-        checkpoint_dir: Some(checkpoints.to_path_buf()),
-        checkpoint_every_s: config.checkpoint_every_s,
-        keep_checkpoints: 2,
-    };
+    let limits = config.run_limits(checkpoints);
     let mut eval_error = None;
     let mut at_target = None;
-    let stop_requested = || {
-        config
-            .stop
-            .as_ref()
-            .is_some_and(|s| s.load(Ordering::Relaxed))
-    };
+    let stop_requested = || config.stop_requested();
     if stop_requested() {
         return Err(CorrectError::Stopped);
     }

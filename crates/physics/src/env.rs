@@ -245,6 +245,15 @@ fn heading_of(rot: Quat, forward: Vec3, heading0: f32) -> Quat {
     Quat::from_rotation_y(yaw)
 }
 
+/// Horizontal speed of the midpoint of a foot's sole (`[heel, toe]` in the
+/// world) when the foot body moves as `s`, m/s.
+#[inline]
+fn sole_speed(s: &BodyState, [heel, toe]: [Vec3; 2]) -> f32 {
+    let mid = 0.5 * (heel + toe);
+    let v = s.vel + s.angvel.cross(mid - s.pos);
+    Vec3::new(v.x, 0.0, v.z).length()
+}
+
 fn exp_map(v: Vec3) -> Quat {
     let angle = v.length();
     if angle < 1e-8 {
@@ -648,20 +657,11 @@ impl ImitationEnv {
                 e += h * h / (scale * scale);
             }
             if skate > 0.0 {
-                let v = self.sole_speed(b, points);
+                let v = sole_speed(&self.sim.state[b], points);
                 e += (v / skate) * (v / skate);
             }
         }
         (-e).exp()
-    }
-
-    /// Horizontal speed of the midpoint of foot `b`'s sole `points`, m/s.
-    #[inline]
-    fn sole_speed(&self, b: usize, [heel, toe]: [Vec3; 2]) -> f32 {
-        let s = self.sim.state[b];
-        let mid = 0.5 * (heel + toe);
-        let v = s.vel + s.angvel.cross(mid - s.pos);
-        Vec3::new(v.x, 0.0, v.z).length()
     }
 
     /// `F = kp (p_ref - p) + kd (v_ref - v)`, `tau = kp_r log(q_ref q^-1) + kd_r (w_ref - w)`.
@@ -883,7 +883,13 @@ impl ImitationEnv {
     /// is not a box).
     #[inline]
     fn sole_world(&self, b: usize) -> [Vec3; 2] {
-        let s = self.sim.state[b];
+        self.sole_at(b, &self.sim.state[b])
+    }
+
+    /// Heel and toe of foot body `b` in the world when the body is at `s`
+    /// (simulated or reference).
+    #[inline]
+    fn sole_at(&self, b: usize, s: &BodyState) -> [Vec3; 2] {
         let local = self.spec.sole_points(b).unwrap_or_else(|| {
             let c = self.spec.bodies[b].com_local;
             [c, c]
@@ -904,18 +910,12 @@ impl ImitationEnv {
                     .feet
                     .iter()
                     .map(|&b| {
-                        let s = frame.bodies[b];
-                        let local = self.spec.sole_points(b).unwrap_or_else(|| {
-                            let c = self.spec.bodies[b].com_local;
-                            [c, c]
-                        });
-                        let [heel, toe] = local.map(|p| s.pos + s.rot * p);
-                        let mid = 0.5 * (heel + toe);
-                        let v = s.vel + s.angvel.cross(mid - s.pos);
+                        let s = &frame.bodies[b];
+                        let [heel, toe] = self.sole_at(b, s);
                         FootContact {
                             heel_m: heel.y,
                             toe_m: toe.y,
-                            speed_m_s: Vec3::new(v.x, 0.0, v.z).length(),
+                            speed_m_s: sole_speed(s, [heel, toe]),
                             touching: heel.y.min(toe.y) <= touch_m,
                         }
                     })
@@ -934,7 +934,7 @@ impl ImitationEnv {
                 FootContact {
                     heel_m: heel.y,
                     toe_m: toe.y,
-                    speed_m_s: self.sole_speed(b, [heel, toe]),
+                    speed_m_s: sole_speed(&self.sim.state[b], [heel, toe]),
                     touching: self.sim.touches_ground(b),
                 }
             })

@@ -185,6 +185,18 @@ impl<'a> Context<'a> {
         }
     }
 
+    /// The context's changes to a correction's (or tracker's) settings:
+    /// checkpoint period, stop flag, the caller's tweaks.
+    fn apply_to(&self, config: &mut correct::CorrectConfig) {
+        if let Some(every) = self.checkpoint_every_s {
+            config.checkpoint_every_s = every;
+        }
+        config.stop = self.stop.clone();
+        if let Some(tune) = self.tune_correction {
+            tune(config);
+        }
+    }
+
     fn stopped(&self) -> bool {
         self.stop
             .as_ref()
@@ -275,22 +287,9 @@ pub fn execute(
                 .map(|n| Ok((n.clone(), inputs.source(n)?.motion)))
                 .collect::<Result<Vec<_>, PipelineError>>()?;
             let mut config = step.tracker_config(*seed);
-            if let Some(every) = ctx.checkpoint_every_s {
-                config.correct.checkpoint_every_s = every;
-            }
-            config.correct.stop = ctx.stop.clone();
-            if let Some(tune) = ctx.tune_correction {
-                tune(&mut config.correct);
-            }
-            let report =
-                stages::train_tracker(&config, &clips, ctx.dir, ctx.on_progress).map_err(|e| {
-                    match e {
-                        PipelineError::Correct(correct::CorrectError::Stopped) => {
-                            PipelineError::Stopped
-                        }
-                        other => other,
-                    }
-                })?;
+            ctx.apply_to(&mut config.correct);
+            let report = stages::train_tracker(&config, &clips, ctx.dir, ctx.on_progress)
+                .map_err(stopped_is_stopped)?;
             out.put(Made::Tracker {
                 group: group.clone(),
                 report,
@@ -395,6 +394,14 @@ fn put_all(out: &mut dyn Outputs, made: Vec<NewClip>, ctx: &Context) -> Result<(
     Ok(())
 }
 
+/// Training stopped on request is the job stopping, not failing.
+fn stopped_is_stopped(e: PipelineError) -> PipelineError {
+    match e {
+        PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
+        other => other,
+    }
+}
+
 /// Where a correction's policy starts.
 enum Warm {
     /// From scratch.
@@ -416,13 +423,7 @@ fn correction(
     warm: Warm,
 ) -> Result<correct::Outcome, PipelineError> {
     let mut config = step.config(seed);
-    if let Some(every) = ctx.checkpoint_every_s {
-        config.checkpoint_every_s = every;
-    }
-    config.stop = ctx.stop.clone();
-    if let Some(tune) = ctx.tune_correction {
-        tune(&mut config);
-    }
+    ctx.apply_to(&mut config);
     let warm_start = match warm {
         Warm::None => None,
         Warm::Checkpoints(dir) => Some(dir),
@@ -447,10 +448,7 @@ fn correction(
         warm_start.as_deref(),
         ctx.on_progress,
     )
-    .map_err(|e| match e {
-        PipelineError::Correct(correct::CorrectError::Stopped) => PipelineError::Stopped,
-        other => other,
-    })?;
+    .map_err(stopped_is_stopped)?;
     (ctx.on_corrected)(&outcome);
     Ok(outcome)
 }
