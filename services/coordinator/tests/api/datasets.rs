@@ -26,24 +26,10 @@ async fn upload_list_show_delete() {
     assert_eq!(clips[1]["frames"], 12);
     let id = body["id"].as_str().unwrap();
 
-    let list: Value = app
-        .get("/v1/datasets")
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let list: Value = app.get_json("/v1/datasets").await;
     assert_eq!(list["datasets"].as_array().unwrap().len(), 1);
     assert_eq!(list["datasets"][0]["clip_count"], 2);
-    let shown: Value = app
-        .get(&format!("/v1/datasets/{id}"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let shown: Value = app.get_json(&format!("/v1/datasets/{id}")).await;
     assert_eq!(shown["clips"], body["clips"]);
     assert_eq!(shown["name"], "test set");
 

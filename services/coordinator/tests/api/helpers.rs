@@ -183,6 +183,11 @@ impl TestApp {
             .unwrap()
     }
 
+    /// `GET path` with the tenant's key, as JSON.
+    pub async fn get_json(&self, path: &str) -> Value {
+        self.get(path).send().await.unwrap().json().await.unwrap()
+    }
+
     /// [`TestApp::augment`]'s answer as JSON.
     pub async fn augment_json(&self, dataset: &str, recipe: &Value) -> Value {
         self.augment(dataset, recipe).await.json().await.unwrap()
@@ -215,13 +220,7 @@ impl TestApp {
     }
 
     pub async fn status(&self, aug: &str) -> Value {
-        self.get(&format!("/v1/augmentations/{aug}"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap()
+        self.get_json(&format!("/v1/augmentations/{aug}")).await
     }
 
     pub async fn cleanup(mut self) {

@@ -37,13 +37,8 @@ async fn dataset_clips_play_for_their_tenant_only() {
     let (dataset, body) = upload_one(&app).await;
     let clip = body["clips"][0]["id"].as_str().unwrap();
     let library: Value = app
-        .get(&format!("/v1/datasets/{dataset}/library"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+        .get_json(&format!("/v1/datasets/{dataset}/library"))
+        .await;
     assert_eq!(library["clips"][0]["name"], "walk");
     assert_eq!(library["clips"][0]["role"], "source");
     let meta_url = library["clips"][0]["urls"]["meta"]
@@ -54,14 +49,7 @@ async fn dataset_clips_play_for_their_tenant_only() {
         meta_url,
         format!("/v1/datasets/{dataset}/clips/{clip}/view/meta")
     );
-    let meta: Value = app
-        .get(&meta_url)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let meta: Value = app.get_json(&meta_url).await;
     // Hips, Spine, Head and the head's end site.
     assert_eq!(meta["points"].as_array().unwrap().len(), 4);
     assert_eq!(meta["frames"], 40);
