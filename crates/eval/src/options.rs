@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::{self, Split};
 use crate::error::{EvalError, Result};
 use crate::predict::data::ClipSet;
-use crate::predict::protocol::{ModelKind, ModelSizes, ProtocolConfig};
+use crate::predict::dmgnn::Reconstruction;
+use crate::predict::occlusion::MaskKind;
+use crate::predict::protocol::{GraphOptions, ModelKind, ModelSizes, ProtocolConfig};
 
 /// Training options of the prediction models; [`Default`] is the CLI's defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -26,6 +28,12 @@ pub struct TrainOptions {
     pub seq2seq_hidden: usize,
     pub gcn_hidden: usize,
     pub gcn_stages: usize,
+    /// Occlusion of the observed frames (V-DMGNN-GAN's masks), training and test.
+    pub mask: MaskKind,
+    /// DMGNN / V-DMGNN-GAN reconstruction loss.
+    pub graph_loss: Reconstruction,
+    /// V-DMGNN-GAN: encode velocities and accelerations too.
+    pub vel_acc: bool,
 }
 
 impl Default for TrainOptions {
@@ -41,6 +49,9 @@ impl Default for TrainOptions {
             seq2seq_hidden: sizes.seq2seq_hidden,
             gcn_hidden: sizes.gcn_hidden,
             gcn_stages: sizes.gcn_stages,
+            mask: MaskKind::None,
+            graph_loss: Reconstruction::L1,
+            vel_acc: false,
         }
     }
 }
@@ -52,6 +63,11 @@ impl TrainOptions {
         c.sizes.seq2seq_hidden = self.seq2seq_hidden;
         c.sizes.gcn_hidden = self.gcn_hidden;
         c.sizes.gcn_stages = self.gcn_stages;
+        c.mask = self.mask;
+        c.graph = GraphOptions {
+            loss: self.graph_loss,
+            vel_acc: self.vel_acc,
+        };
         c.train.batch_size = self.batch_size;
         c.train.lr = self.lr;
         c.seeds = self.seeds.clone();

@@ -19,6 +19,8 @@ use std::time::Instant;
 use ::eval::augment::{Augmentation, VaeChoice};
 use ::eval::dataset::Split;
 use ::eval::options::TrainOptions;
+use ::eval::predict::dmgnn::Reconstruction;
+use ::eval::predict::occlusion::MaskKind;
 use ::eval::predict::protocol::{self, Horizons, ModelKind};
 use ::eval::scores::synth_scores;
 use ::eval::table::{self, PhysicsConfig, SetKind, Table, TableConfig};
@@ -238,6 +240,16 @@ struct TrainArgs {
     /// Residual blocks (two graph convolutions each) of the GCN.
     #[arg(long, default_value_t = TrainOptions::default().gcn_stages)]
     gcn_stages: usize,
+    /// Occlusion of the observed frames in training and test: none, lower
+    /// (every lower-body joint) or random (each angle visible with p = 0.8).
+    #[arg(long, default_value_t = TrainOptions::default().mask)]
+    mask: MaskKind,
+    /// Reconstruction loss of dmgnn / vdmgnn: l1 or l2.
+    #[arg(long, default_value_t = TrainOptions::default().graph_loss)]
+    loss: Reconstruction,
+    /// vdmgnn: also encode velocities and accelerations (V-DMGNN-GAN Table 2).
+    #[arg(long)]
+    vel_acc: bool,
 }
 
 impl TrainArgs {
@@ -252,6 +264,9 @@ impl TrainArgs {
             seq2seq_hidden: self.seq2seq_hidden,
             gcn_hidden: self.gcn_hidden,
             gcn_stages: self.gcn_stages,
+            mask: self.mask,
+            graph_loss: self.loss,
+            vel_acc: self.vel_acc,
         }
     }
 }
@@ -260,7 +275,9 @@ impl TrainArgs {
 struct PredictArgs {
     #[command(flatten)]
     fold: FoldArgs,
-    /// seq2seq (GRU, residual decoding) or gcn (DCT + graph convolutions).
+    /// seq2seq (GRU, residual decoding), gcn (DCT + graph convolutions),
+    /// dmgnn (multi-scale graph encoder, graph-GRU decoder) or vdmgnn
+    /// (V-DMGNN-GAN: dmgnn made variational, with a recurrent discriminator).
     #[arg(long)]
     model: ModelKind,
     #[command(flatten)]
@@ -301,6 +318,7 @@ fn run_predict(args: PredictArgs) -> anyhow::Result<()> {
         "matched_classes": split.classes(),
         "test_actor": args.fold.test_actor,
         "model": args.model,
+        "mask": config.mask,
         "augmentation": aug.as_ref().map(|a| a.label()),
         "train_files": split.train_files.iter().map(|f| &f.name).collect::<Vec<_>>(),
         "test_files": split.test_files.iter().map(|f| &f.name).collect::<Vec<_>>(),

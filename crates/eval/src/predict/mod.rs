@@ -9,15 +9,25 @@
 //! * [`train`]: the training loop (the `nn` optimiser: AdamW after global
 //!   gradient-norm clipping; seeded batches).
 //!
+//! * [`body_graph`], [`graph_layers`], [`dmgnn`], [`vdmgnn`]: DMGNN and
+//!   V-DMGNN-GAN (multi-scale graph encoders over the skeleton, graph-GRU
+//!   decoders; the second variational with a recurrent discriminator).
+//! * [`occlusion`]: the lower-body and random masks on observed features.
+//!
 //! The models are built from the `nn` crate's seeded parameter store and layers.
 //! * [`protocol`]: one leave-one-actor-out run: train, predict, score.
 
+pub mod body_graph;
 pub mod data;
 pub mod dct;
+pub mod dmgnn;
 pub mod gcn;
+pub mod graph_layers;
+pub mod occlusion;
 pub mod protocol;
 pub mod seq2seq;
 pub mod train;
+pub mod vdmgnn;
 
 use candle_core::Tensor;
 use nn::Params;
@@ -32,6 +42,35 @@ pub trait Predictor {
     fn predict(&self, input: &Tensor, frames: usize) -> Result<Tensor>;
     /// The trainable parameters.
     fn params(&self) -> &Params;
+    /// A model trained against a discriminator ([`train::train`] alternates
+    /// its generator and discriminator steps).
+    fn adversarial(&self) -> Option<&dyn Adversarial> {
+        None
+    }
+}
+
+/// The adversarial half of a GAN-trained predictor. `clean` is the unmasked
+/// observed input (what the discriminator sees), `masked` what the generator sees.
+pub trait Adversarial {
+    fn generator_loss(&self, clean: &Tensor, masked: &Tensor, target: &Tensor) -> Result<Tensor>;
+    fn discriminator_loss(
+        &self,
+        clean: &Tensor,
+        masked: &Tensor,
+        target: &Tensor,
+    ) -> Result<Tensor>;
+    fn discriminator_params(&self) -> &Params;
+    fn discriminator_lr(&self) -> f64;
+    /// Every discriminator parameter is clamped to `[-clip, clip]` after its step.
+    fn clip(&self) -> f32;
+}
+
+/// L1 (mean absolute) or L2 (mean squared) error of two tensors of one shape.
+pub(crate) fn l1_or_l2(kind: dmgnn::Reconstruction, a: &Tensor, b: &Tensor) -> Result<Tensor> {
+    match kind {
+        dmgnn::Reconstruction::L1 => Ok((a - b)?.abs()?.mean_all()?),
+        dmgnn::Reconstruction::L2 => mse(a, b),
+    }
 }
 
 /// Mean squared error of two tensors of one shape.

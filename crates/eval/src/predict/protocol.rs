@@ -15,18 +15,23 @@
 use std::collections::BTreeMap;
 
 use motion::Motion;
+use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
 use crate::euler::l2_distance;
 use crate::predict::Predictor;
+use crate::predict::body_graph::BodyGraph;
 use crate::predict::data::{
     ClipSet, HORIZONS_MS, INPUT_FRAMES, Normalizer, OUTPUT_FRAMES, batch, features_to_euler,
     horizon_index,
 };
+use crate::predict::dmgnn::{Dmgnn, DmgnnConfig, Reconstruction};
 use crate::predict::gcn::{Gcn, GcnConfig};
+use crate::predict::occlusion::{MaskKind, Occluder};
 use crate::predict::seq2seq::{Seq2Seq, Seq2SeqConfig};
-use crate::predict::train::{TrainConfig, train};
+use crate::predict::train::{TrainConfig, train_batches};
+use crate::predict::vdmgnn::{Vdmgnn, VdmgnnConfig};
 
 /// Which prediction model to train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -34,6 +39,8 @@ use crate::predict::train::{TrainConfig, train};
 pub enum ModelKind {
     Seq2seq,
     Gcn,
+    Dmgnn,
+    Vdmgnn,
 }
 
 impl std::str::FromStr for ModelKind {
@@ -42,7 +49,11 @@ impl std::str::FromStr for ModelKind {
         match s.to_ascii_lowercase().as_str() {
             "seq2seq" | "rnn" => Ok(ModelKind::Seq2seq),
             "gcn" => Ok(ModelKind::Gcn),
-            _ => Err(format!("unknown model `{s}` (seq2seq or gcn)")),
+            "dmgnn" => Ok(ModelKind::Dmgnn),
+            "vdmgnn" | "v-dmgnn-gan" | "vdmgnn-gan" => Ok(ModelKind::Vdmgnn),
+            _ => Err(format!(
+                "unknown model `{s}` (seq2seq, gcn, dmgnn or vdmgnn)"
+            )),
         }
     }
 }
@@ -52,17 +63,32 @@ impl std::fmt::Display for ModelKind {
         f.write_str(match self {
             ModelKind::Seq2seq => "seq2seq",
             ModelKind::Gcn => "gcn",
+            ModelKind::Dmgnn => "dmgnn",
+            ModelKind::Vdmgnn => "vdmgnn",
         })
     }
 }
 
-/// Model sizes (see [`Seq2SeqConfig`], [`GcnConfig`]).
+/// Model sizes (see [`Seq2SeqConfig`], [`GcnConfig`], [`DmgnnConfig`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ModelSizes {
     pub seq2seq_hidden: usize,
     pub gcn_hidden: usize,
     pub gcn_stages: usize,
     pub gcn_coefficients: usize,
+    /// DMGNN / V-DMGNN-GAN encoder block channels and decoder state.
+    #[serde(default = "default_graph_channels")]
+    pub graph_channels: [usize; 4],
+    #[serde(default = "default_graph_hidden")]
+    pub graph_hidden: usize,
+}
+
+fn default_graph_channels() -> [usize; 4] {
+    DmgnnConfig::new(INPUT_FRAMES).channels
+}
+
+fn default_graph_hidden() -> usize {
+    DmgnnConfig::new(INPUT_FRAMES).hidden
 }
 
 impl Default for ModelSizes {
@@ -72,8 +98,50 @@ impl Default for ModelSizes {
             gcn_hidden: 64,
             gcn_stages: 2,
             gcn_coefficients: 20,
+            graph_channels: default_graph_channels(),
+            graph_hidden: default_graph_hidden(),
         }
     }
+}
+
+/// The DMGNN / V-DMGNN-GAN options of a protocol run (Table 2's ablations).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct GraphOptions {
+    /// Reconstruction loss (default L1).
+    #[serde(default)]
+    pub loss: Reconstruction,
+    /// V-DMGNN-GAN: also encode velocities and accelerations (DMGNN always does).
+    #[serde(default)]
+    pub vel_acc: bool,
+}
+
+/// Builds a DMGNN or V-DMGNN-GAN predictor (the other kinds are not graph models).
+pub fn build_graph_model(
+    kind: ModelKind,
+    sizes: &ModelSizes,
+    options: &GraphOptions,
+    graph: &BodyGraph,
+    input_frames: usize,
+    seed: u64,
+) -> Result<Box<dyn Predictor>> {
+    let mut d = DmgnnConfig::new(input_frames);
+    d.channels = sizes.graph_channels;
+    d.hidden = sizes.graph_hidden;
+    d.embed = sizes.graph_hidden;
+    d.loss = options.loss;
+    Ok(match kind {
+        ModelKind::Dmgnn => Box::new(Dmgnn::new(&d, graph, seed)?),
+        ModelKind::Vdmgnn => {
+            d.vel_acc = options.vel_acc;
+            let mut v = VdmgnnConfig::new(input_frames);
+            v.latent = d.hidden;
+            v.dmgnn = d;
+            Box::new(Vdmgnn::new(&v, graph, seed)?)
+        }
+        other => {
+            return Err(EvalError::Config(format!("{other} is not a graph model")));
+        }
+    })
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -88,6 +156,11 @@ pub struct ProtocolConfig {
     /// Caps (evenly spaced) on training and test windows; `None`: all.
     pub max_train_windows: Option<usize>,
     pub max_test_windows: Option<usize>,
+    /// Occlusion of the observed frames, in training and test alike.
+    #[serde(default)]
+    pub mask: MaskKind,
+    #[serde(default)]
+    pub graph: GraphOptions,
 }
 
 impl ProtocolConfig {
@@ -100,6 +173,8 @@ impl ProtocolConfig {
             stride: 1,
             max_train_windows: None,
             max_test_windows: None,
+            mask: MaskKind::None,
+            graph: GraphOptions::default(),
         }
     }
 }
@@ -148,7 +223,13 @@ pub type Augment<'a> = &'a dyn Fn(&[(String, Motion)]) -> Result<Vec<(String, Mo
 pub struct TestSet {
     set: ClipSet,
     reference: Motion,
+    /// The feature nodes (every non-root joint of the reference skeleton).
+    graph: BodyGraph,
+    occluder: Occluder,
 }
+
+/// Seed of the test masks: every model and condition sees the same occlusions.
+const TEST_MASK_SEED: u64 = 0x7e57_3a5c;
 
 impl TestSet {
     pub fn new(test: &[(String, Motion)], config: &ProtocolConfig) -> Result<TestSet> {
@@ -167,7 +248,14 @@ impl TestSet {
                 INPUT_FRAMES + OUTPUT_FRAMES
             )));
         }
-        Ok(TestSet { set, reference })
+        let graph = BodyGraph::non_root(reference.skeleton())?;
+        let occluder = Occluder::new(config.mask, &graph)?;
+        Ok(TestSet {
+            set,
+            reference,
+            graph,
+            occluder,
+        })
     }
 
     pub fn clips(&self) -> usize {
@@ -178,7 +266,7 @@ impl TestSet {
         self.set.windows.len()
     }
 
-    /// Error of predicting "the pose stays the last observed one".
+    /// Error of predicting "the pose stays the last observed one" (unmasked).
     pub fn zero_velocity(&self) -> Horizons {
         let mut sums = [0.0; HORIZONS_MS.len()];
         for &(c, s) in &self.set.windows {
@@ -196,8 +284,10 @@ impl TestSet {
     fn score(&self, model: &dyn Predictor, norm: &Normalizer) -> Result<Horizons> {
         let mut sums = [0.0; HORIZONS_MS.len()];
         let d = self.set.dim;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(TEST_MASK_SEED);
         for chunk in self.set.windows.chunks(256) {
             let (input, _) = batch(&self.set, norm, chunk)?;
+            let input = self.occluder.apply(&input, &mut rng)?;
             let pred = model.predict(&input, OUTPUT_FRAMES)?;
             let mut flat: Vec<f32> = pred.flatten_all()?.to_vec1()?;
             norm.denorm(&mut flat);
@@ -223,8 +313,21 @@ fn horizons(sums: [f64; HORIZONS_MS.len()], n: usize) -> Horizons {
         .collect()
 }
 
-fn build(config: &ProtocolConfig, dim: usize, seed: u64) -> Result<Box<dyn Predictor>> {
+fn build(
+    config: &ProtocolConfig,
+    graph: &BodyGraph,
+    dim: usize,
+    seed: u64,
+) -> Result<Box<dyn Predictor>> {
     Ok(match config.model {
+        ModelKind::Dmgnn | ModelKind::Vdmgnn => build_graph_model(
+            config.model,
+            &config.sizes,
+            &config.graph,
+            graph,
+            INPUT_FRAMES,
+            seed,
+        )?,
         ModelKind::Seq2seq => Box::new(Seq2Seq::new(
             &Seq2SeqConfig {
                 dim,
@@ -273,8 +376,26 @@ pub fn evaluate(
     let mut seconds = Vec::new();
     let (mut first, mut last) = (0.0, 0.0);
     for &seed in &config.seeds {
-        let model = build(config, set.dim, seed)?;
-        let report = train(model.as_ref(), &set, &norm, &config.train, seed, |_, _| {})?;
+        let model = build(config, &test.graph, set.dim, seed)?;
+        if set.windows.is_empty() {
+            return Err(EvalError::Data(
+                "no training windows (every clip is shorter than a window)".into(),
+            ));
+        }
+        let windows = &set.windows;
+        let report = train_batches(
+            model.as_ref(),
+            &config.train,
+            seed,
+            Some(&test.occluder),
+            |rng| {
+                let picks: Vec<(usize, usize)> = (0..config.train.batch_size)
+                    .map(|_| windows[rng.random_range(0..windows.len())])
+                    .collect();
+                batch(&set, &norm, &picks)
+            },
+            |_, _| {},
+        )?;
         let errors = test.score(model.as_ref(), &norm)?;
         progress(&format!(
             "{} seed {seed}: {} windows of {} clips, loss {:.4} -> {:.4} in {:.1} s; error 100/200/400 ms {:.3}/{:.3}/{:.3} rad",
@@ -406,6 +527,105 @@ mod tests {
             .collect()
     }
 
+    /// A skeleton with legs and arms (so bodies, parts and the lower-body
+    /// mask exist), every joint swinging at its own phase.
+    fn limbed_clips(n: usize, phase0: f64) -> Vec<(String, Motion)> {
+        let names = [
+            ("root", None),
+            ("lfemur", Some(0)),
+            ("ltibia", Some(1)),
+            ("lfoot", Some(2)),
+            ("rfemur", Some(0)),
+            ("rtibia", Some(4)),
+            ("rfoot", Some(5)),
+            ("thorax", Some(0)),
+            ("head", Some(7)),
+            ("lhumerus", Some(7)),
+            ("lwrist", Some(9)),
+            ("rhumerus", Some(7)),
+            ("rwrist", Some(11)),
+        ];
+        let s = Arc::new(
+            Skeleton::new(
+                names
+                    .iter()
+                    .map(|(name, parent)| Joint {
+                        name: (*name).into(),
+                        parent: *parent,
+                        offset: if name.contains("femur")
+                            || name.contains("tibia")
+                            || name.contains("foot")
+                        {
+                            DVec3::new(0.0, -0.4, 0.0)
+                        } else {
+                            DVec3::new(0.0, 0.3, 0.0)
+                        },
+                        channels: vec![],
+                        end_site: None,
+                        limits: None,
+                    })
+                    .collect(),
+                1.0,
+            )
+            .unwrap(),
+        );
+        (0..n)
+            .map(|i| {
+                let speed = 0.15 + 0.02 * i as f64;
+                let phase = phase0 + i as f64;
+                let frames = 40;
+                let rot = (0..frames)
+                    .flat_map(|t| {
+                        (0..names.len()).map(move |j| {
+                            let x = phase + speed * t as f64 + 0.4 * j as f64;
+                            if j == 0 {
+                                DQuat::IDENTITY
+                            } else {
+                                DQuat::from_rotation_x(0.6 * x.sin())
+                            }
+                        })
+                    })
+                    .collect();
+                (
+                    format!("clip{i}"),
+                    Motion::new(s.clone(), 30.0, vec![DVec3::ZERO; frames], rot).unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn graph_models_learn_under_masks() {
+        let train = limbed_clips(6, 0.0);
+        let test = limbed_clips(2, 0.5);
+        for (model, mask) in [
+            (ModelKind::Dmgnn, MaskKind::Lower),
+            (ModelKind::Vdmgnn, MaskKind::Random),
+        ] {
+            let mut config = ProtocolConfig::new(model);
+            config.sizes.graph_channels = [8, 8, 16, 16];
+            config.sizes.graph_hidden = 16;
+            config.mask = mask;
+            config.train.iterations = 80;
+            config.train.batch_size = 8;
+            config.train.lr = 3e-3;
+            let r = run(&train, &test, None, &config, &mut |_| {}).unwrap();
+            assert!(
+                r.no_aug.last_loss < 0.7 * r.no_aug.first_loss,
+                "{model} {mask}: {:?}",
+                r.no_aug
+            );
+            for ms in ["100", "200", "400"] {
+                assert!(r.no_aug.errors[ms].is_finite());
+            }
+            // The occluded test input makes a difference to the same model.
+            let mut clean = config.clone();
+            clean.mask = MaskKind::None;
+            let r2 = run(&train, &test, None, &clean, &mut |_| {}).unwrap();
+            assert_ne!(r.no_aug.errors["100"], r2.no_aug.errors["100"]);
+        }
+    }
+
     #[test]
     fn both_models_learn_and_beat_zero_velocity() {
         let train = clips(6, 0.0);
@@ -417,6 +637,7 @@ mod tests {
                 gcn_hidden: 16,
                 gcn_stages: 1,
                 gcn_coefficients: 20,
+                ..ModelSizes::default()
             };
             config.train.iterations = 150;
             config.train.batch_size = 16;

@@ -2,6 +2,12 @@
 //! gradient-norm clipping), batches of windows drawn uniformly with a seeded
 //! ChaCha RNG, a fixed number of iterations (so a model trained with augmented
 //! clips gets the same budget as one without).
+//!
+//! With an [`Occluder`] the observed frames of every batch are masked afresh
+//! (the targets never are). A model with an [`Adversarial`] half steps its
+//! discriminator (its own Adam, learning rate and parameter clipping) before
+//! each generator step, on the same batch (the reference code alternates
+//! iterations: the same one-to-one ratio); the loss reported is the generator's.
 
 use std::time::Instant;
 
@@ -11,8 +17,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
-use crate::predict::Predictor;
 use crate::predict::data::{ClipSet, Normalizer, batch};
+use crate::predict::occlusion::Occluder;
+use crate::predict::{Adversarial, Predictor};
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
@@ -52,13 +59,40 @@ pub fn train(
     norm: &Normalizer,
     config: &TrainConfig,
     seed: u64,
-    mut progress: impl FnMut(usize, f64),
+    progress: impl FnMut(usize, f64),
 ) -> Result<TrainReport> {
     if set.windows.is_empty() {
         return Err(EvalError::Data(
             "no training windows (every clip is shorter than a window)".into(),
         ));
     }
+    let windows = &set.windows;
+    train_batches(
+        model,
+        config,
+        seed,
+        None,
+        |rng| {
+            let picks: Vec<(usize, usize)> = (0..config.batch_size)
+                .map(|_| windows[rng.random_range(0..windows.len())])
+                .collect();
+            batch(set, norm, &picks)
+        },
+        progress,
+    )
+}
+
+/// The loop itself, over batches `(input, target)` drawn by `next_batch`;
+/// `occluder` masks the inputs. Shared by the HDM05 protocol and the CMU
+/// (DMGNN preprocessing) protocol, whose batches come from another data set.
+pub fn train_batches(
+    model: &dyn Predictor,
+    config: &TrainConfig,
+    seed: u64,
+    occluder: Option<&Occluder>,
+    mut next_batch: impl FnMut(&mut ChaCha8Rng) -> Result<(candle_core::Tensor, candle_core::Tensor)>,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<TrainReport> {
     if config.iterations == 0 || config.batch_size == 0 {
         return Err(EvalError::Config(
             "iterations and batch size must be at least 1".into(),
@@ -75,15 +109,33 @@ pub fn train(
         },
         Some(config.max_grad_norm as f32),
     );
+    let adversary = model.adversarial();
+    let mut disc = adversary.map(|a| {
+        Optimizer::new(
+            a.discriminator_params().vars(),
+            AdamConfig {
+                weight_decay: config.weight_decay,
+                ..AdamConfig::new(a.discriminator_lr())
+            },
+            Some(config.max_grad_norm as f32),
+        )
+    });
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_ba7c);
     let tenth = (config.iterations / 10).max(1);
     let (mut first, mut last) = (0.0, 0.0);
     for it in 0..config.iterations {
-        let picks: Vec<(usize, usize)> = (0..config.batch_size)
-            .map(|_| set.windows[rng.random_range(0..set.windows.len())])
-            .collect();
-        let (input, target) = batch(set, norm, &picks)?;
-        let loss = model.loss(&input, &target)?;
+        let (input, target) = next_batch(&mut rng)?;
+        let masked = match occluder {
+            Some(o) => o.apply(&input, &mut rng)?,
+            None => input.clone(),
+        };
+        if let (Some(a), Some(d_opt)) = (adversary, disc.as_mut()) {
+            discriminator_step(a, d_opt, &input, &masked, &target)?;
+        }
+        let loss = match adversary {
+            Some(a) => a.generator_loss(&input, &masked, &target)?,
+            None => model.loss(&masked, &target)?,
+        };
         let value = loss.to_scalar::<f32>()? as f64;
         if !value.is_finite() {
             return Err(EvalError::Data(format!(
@@ -104,4 +156,22 @@ pub fn train(
         last_loss: last,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// One discriminator step, then every discriminator parameter clamped.
+fn discriminator_step(
+    a: &dyn Adversarial,
+    opt: &mut Optimizer,
+    clean: &candle_core::Tensor,
+    masked: &candle_core::Tensor,
+    target: &candle_core::Tensor,
+) -> Result<()> {
+    let loss = a.discriminator_loss(clean, masked, target)?;
+    opt.step(&loss.backward()?)?;
+    let c = a.clip();
+    for (_, v) in a.discriminator_params().vars() {
+        let clamped = v.as_tensor().clamp(-c, c)?;
+        v.set(&clamped)?;
+    }
+    Ok(())
 }
