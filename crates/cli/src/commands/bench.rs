@@ -40,6 +40,76 @@ enum What {
     },
     /// Correct clips of each class and tabulate acceptance, plausibility and wall time.
     Correction(CorrectionArgs),
+    /// Training cost of a prediction model (DMGNN, V-DMGNN-GAN): seconds per
+    /// iteration and windows per second of the real training loop.
+    Predictor(PredictorArgs),
+}
+
+#[derive(clap::Args)]
+struct PredictorArgs {
+    /// dmgnn or vdmgnn.
+    #[arg(long, default_value = "dmgnn")]
+    model: eval::predict::protocol::ModelKind,
+    /// ASF or BVH skeleton whose non-root joints are the graph's nodes.
+    #[arg(long, default_value = "examples/data/HDM_bd.asf")]
+    skeleton: PathBuf,
+    /// Observed frames (CMU protocol: 50; HDM05 protocol: 10).
+    #[arg(long, default_value_t = 50)]
+    frames: usize,
+    /// Predicted frames.
+    #[arg(long, default_value_t = 10)]
+    predict: usize,
+    #[arg(long, default_value_t = 32)]
+    batch: usize,
+    #[arg(long, default_value_t = 5)]
+    iterations: usize,
+    #[arg(long, default_value = "lower")]
+    mask: eval::predict::occlusion::MaskKind,
+    /// V-DMGNN-GAN: encode velocities and accelerations too.
+    #[arg(long)]
+    vel_acc: bool,
+    #[arg(long)]
+    json: bool,
+}
+
+fn bench_predictor(args: PredictorArgs) -> anyhow::Result<()> {
+    let skeleton = motion::io::load(&args.skeleton, &motion::io::LoadOptions::default())
+        .with_context(|| format!("cannot read the skeleton {}", args.skeleton.display()))?;
+    let graph = eval::predict::body_graph::BodyGraph::non_root(skeleton.skeleton())?;
+    let options = eval::predict::protocol::GraphOptions {
+        vel_acc: args.vel_acc,
+        ..Default::default()
+    };
+    let r = eval::predict::bench::bench_predictor(
+        args.model,
+        &eval::predict::protocol::ModelSizes::default(),
+        &options,
+        &graph,
+        args.frames,
+        args.predict,
+        args.batch,
+        args.iterations,
+        args.mask,
+    )?;
+    let text = if args.json {
+        serde_json::to_string_pretty(&r)? + "\n"
+    } else {
+        format!(
+            "{}: {:.3} s per iteration ({:.1} windows/s) over {} iterations of batch {} \
+             ({} observed + {} predicted frames, {} nodes, {} parameters, {} matmul threads)\n",
+            r.model,
+            r.seconds_per_iteration,
+            r.windows_per_second,
+            r.iterations,
+            r.batch_size,
+            r.input_frames,
+            r.output_frames,
+            r.nodes,
+            r.parameters,
+            r.threads
+        )
+    };
+    print_stdout(&text)
 }
 
 #[derive(clap::Args)]
@@ -273,6 +343,7 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Correction(a) => bench_correction(a),
+        What::Predictor(a) => bench_predictor(a),
         What::Physics {
             clip,
             input,

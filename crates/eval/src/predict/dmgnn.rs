@@ -11,8 +11,11 @@
 //!   end the parts' and bodies' features are spread back to their joints
 //!   (weighted by `lambda`), a fifth block runs on the joints, and the frames
 //!   are averaged.
-//! * Three such encoders read positions, velocities and accelerations; their
-//!   node features are concatenated and projected to the decoder's state.
+//! * The encoder reads each node's position, velocity and acceleration as nine
+//!   input channels (the original runs three encoders, one per quantity, and
+//!   concatenates their features: three times the cost for what one encoder
+//!   with the three as channels also sees); its node features are projected to
+//!   the decoder's state.
 //! * [`GgruDecoder`]: a graph GRU ([`GraphGru`]) started from that state, fed
 //!   each step the current pose with its velocity and acceleration, predicting
 //!   the change to the next pose (residual).
@@ -57,7 +60,7 @@ pub struct DmgnnConfig {
     /// Weight of the parts' and bodies' features spread back to the joints
     /// (original `lamda`: 0.6).
     pub lambda: f32,
-    /// Read velocities and accelerations with their own encoders.
+    /// Read velocities and accelerations too (as input channels).
     pub vel_acc: bool,
     pub loss: Reconstruction,
 }
@@ -323,9 +326,13 @@ impl GgruDecoder {
     }
 }
 
-/// Velocities and accelerations of `(B, T, V, 3)` frames (zero where a frame
-/// has no predecessor), as DMGNN's encoders read them.
-pub fn differences(x: &Tensor) -> Result<(Tensor, Tensor)> {
+/// The encoder's input of `(B, T, V, 3)` frames: the positions, or with
+/// `vel_acc` positions, velocities and accelerations `(B, T, V, 9)` (zero where
+/// a frame has no predecessor).
+pub fn encoder_input(x: &Tensor, vel_acc: bool) -> Result<Tensor> {
+    if !vel_acc {
+        return Ok(x.clone());
+    }
     let t = x.dim(1)?;
     let zero = x.narrow(1, 0, 1)?.zeros_like()?;
     let v = Tensor::cat(
@@ -336,13 +343,18 @@ pub fn differences(x: &Tensor) -> Result<(Tensor, Tensor)> {
         &[&zero, &(v.narrow(1, 1, t - 1)? - v.narrow(1, 0, t - 1)?)?],
         1,
     )?;
-    Ok((v, a))
+    Ok(Tensor::cat(&[x, &v, &a], D::Minus1)?)
+}
+
+/// Input channels per node of the encoder.
+pub fn encoder_channels(vel_acc: bool) -> usize {
+    if vel_acc { 9 } else { 3 }
 }
 
 pub struct Dmgnn {
     config: DmgnnConfig,
     nodes: usize,
-    encoders: Vec<MultiScaleEncoder>,
+    encoder: MultiScaleEncoder,
     to_state: Linear,
     decoder: GgruDecoder,
     params: Params,
@@ -352,14 +364,12 @@ impl Dmgnn {
     pub fn new(config: &DmgnnConfig, graph: &BodyGraph, seed: u64) -> Result<Self> {
         config.validate()?;
         let p = Params::new(seed);
-        let n_enc = if config.vel_acc { 3 } else { 1 };
-        let encoders = (0..n_enc)
-            .map(|i| MultiScaleEncoder::new(&p, &format!("enc{i}"), graph, config, 3))
-            .collect::<Result<Vec<_>>>()?;
+        let encoder =
+            MultiScaleEncoder::new(&p, "enc", graph, config, encoder_channels(config.vel_acc))?;
         Ok(Dmgnn {
-            to_state: Linear::new(&p, "to_state", n_enc * config.channels[3], config.hidden)?,
+            to_state: Linear::new(&p, "to_state", config.channels[3], config.hidden)?,
             decoder: GgruDecoder::new(&p, "dec", graph, config.hidden)?,
-            encoders,
+            encoder,
             nodes: graph.nodes(),
             config: config.clone(),
             params: p,
@@ -385,16 +395,10 @@ impl Dmgnn {
 
     fn run(&self, input: &Tensor, frames: usize) -> Result<Tensor> {
         let x = self.nodes_of(input)?;
-        let mut feats = vec![self.encoders[0].forward(&x)?.0];
-        if self.config.vel_acc {
-            let (v, a) = differences(&x)?;
-            feats.push(self.encoders[1].forward(&v)?.0);
-            feats.push(self.encoders[2].forward(&a)?.0);
-        }
-        let h = self
-            .to_state
-            .forward(&Tensor::cat(&feats, D::Minus1)?)?
-            .relu()?;
+        let (feats, _) = self
+            .encoder
+            .forward(&encoder_input(&x, self.config.vel_acc)?)?;
+        let h = self.to_state.forward(&feats)?.relu()?;
         let y = self.decoder.forward(&x, &h, frames)?;
         let (b, _, _, _) = y.dims4()?;
         Ok(y.reshape((b, frames, 3 * self.nodes))?)

@@ -8,9 +8,11 @@
 //! * [`TemporalConv`]: a convolution over frames (kernel 5, zero padding,
 //!   optional stride) as one product over the stacked shifted frames.
 //! * [`StGcn`]: DMGNN's single-scale graph convolution block (SS-GCB): spatial
-//!   convolution, layer norm, ReLU, temporal convolution, layer norm, residual.
-//!   Layer norm over channels stands in for the original's batch norm (no
-//!   running statistics to keep; the same function in training and test).
+//!   convolution, ReLU, temporal convolution, layer norm, residual, ReLU. One
+//!   layer norm over channels stands in for the original's two batch norms (no
+//!   running statistics to keep; the same function in training and test; a
+//!   second norm doubled the block's cost on a CPU, measured with
+//!   `motionaug bench predictor`).
 //! * [`mix_nodes`]: `(S, V)` node mixing (pooling to parts and bodies, spreading
 //!   back, attention).
 //! * [`GraphGru`]: DMGNN's graph GRU cell (G-GRU), used by the decoder and the
@@ -22,24 +24,16 @@ use nn::{LayerNorm, Linear, Params};
 use crate::error::Result;
 use crate::predict::body_graph::{BodyGraph, Scale};
 
-/// `out[.., s, c] = sum_v m[s, v] x[.., v, c]` for `x` `(.., V, C)`, `m` `(S, V)`.
+/// `out[.., s, c] = sum_v m[s, v] x[.., v, c]` for `x` `(.., V, C)`, `m` `(S, V)`:
+/// one batched product with `m` broadcast over the leading dimensions (no
+/// transposed copies of `x`).
 pub fn mix_nodes(m: &Tensor, x: &Tensor) -> Result<Tensor> {
     let dims = x.dims().to_vec();
     let r = dims.len();
     let (v, c) = (dims[r - 2], dims[r - 1]);
     let lead: usize = dims[..r - 2].iter().product();
     let s = m.dim(0)?;
-    // One (S, V) x (V, lead * C) product.
-    let by_node = x
-        .reshape((lead, v, c))?
-        .transpose(0, 1)?
-        .contiguous()?
-        .reshape((v, lead * c))?;
-    let mixed = m
-        .matmul(&by_node)?
-        .reshape((s, lead, c))?
-        .transpose(0, 1)?
-        .contiguous()?;
+    let mixed = m.broadcast_left(lead)?.matmul(&x.reshape((lead, v, c))?)?;
     let mut out = dims[..r - 2].to_vec();
     out.extend([s, c]);
     Ok(mixed.reshape(out)?)
@@ -139,15 +133,14 @@ impl TemporalConv {
         let zeros = Tensor::zeros((b, pad, v, c), x.dtype(), x.device())?;
         let padded = Tensor::cat(&[&zeros, x, &zeros], 1)?;
         let t_out = self.frames_out(t);
+        // Each shift takes only the frames the stride keeps.
         let shifted: Vec<Tensor> = (0..self.kernel)
             .map(|k| {
-                let s = padded.narrow(1, k, t)?.contiguous()?;
                 if self.stride == 1 {
-                    Ok(s)
+                    padded.narrow(1, k, t)?.contiguous()
                 } else {
-                    let idx: Vec<u32> = (0..t_out).map(|i| (i * self.stride) as u32).collect();
-                    let idx = Tensor::from_vec(idx, t_out, x.device())?;
-                    s.index_select(&idx, 1)
+                    let idx: Vec<u32> = (0..t_out).map(|i| (k + i * self.stride) as u32).collect();
+                    padded.index_select(&Tensor::from_vec(idx, t_out, x.device())?, 1)
                 }
             })
             .collect::<candle_core::Result<_>>()?;
@@ -159,9 +152,8 @@ impl TemporalConv {
 /// DMGNN's SS-GCB.
 pub struct StGcn {
     gcn: SpatialConv,
-    norm1: LayerNorm,
     tcn: TemporalConv,
-    norm2: LayerNorm,
+    norm: LayerNorm,
     residual: Residual,
 }
 
@@ -195,17 +187,16 @@ impl StGcn {
         };
         Ok(StGcn {
             gcn: SpatialConv::new(p, &format!("{name}.gcn"), graph, scale, c_in, c_out)?,
-            norm1: LayerNorm::new(p, &format!("{name}.norm1"), c_out)?,
             tcn: TemporalConv::new(p, &format!("{name}.tcn"), c_out, c_out, 5, stride)?,
-            norm2: LayerNorm::new(p, &format!("{name}.norm2"), c_out)?,
+            norm: LayerNorm::new(p, &format!("{name}.norm"), c_out)?,
             residual,
         })
     }
 
     /// `(B, T, S, C_in)` -> `(B, ceil(T / stride), S, C_out)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let h = self.norm1.forward(&self.gcn.forward(x)?)?.relu()?;
-        let h = self.norm2.forward(&self.tcn.forward(&h)?)?;
+        let h = self.gcn.forward(x)?.relu()?;
+        let h = self.norm.forward(&self.tcn.forward(&h)?)?;
         let h = match &self.residual {
             Residual::None => h,
             Residual::Identity => (h + x)?,

@@ -17,6 +17,7 @@
 //! The models are built from the `nn` crate's seeded parameter store and layers.
 //! * [`protocol`]: one leave-one-actor-out run: train, predict, score.
 
+pub mod bench;
 pub mod body_graph;
 pub mod data;
 pub mod dct;

@@ -19,7 +19,7 @@
 
 use std::sync::Mutex;
 
-use candle_core::{D, Tensor};
+use candle_core::Tensor;
 use nn::{Linear, Params, kl_mean, normal, reparameterise};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -27,7 +27,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
 use crate::predict::body_graph::{BodyGraph, Scale};
-use crate::predict::dmgnn::{DmgnnConfig, GgruDecoder, MultiScaleEncoder, differences};
+use crate::predict::dmgnn::{
+    DmgnnConfig, GgruDecoder, MultiScaleEncoder, encoder_channels, encoder_input,
+};
 use crate::predict::graph_layers::{GraphGru, SpatialConv, TemporalConv, pos_vel_acc};
 use crate::predict::{Adversarial, Predictor, l1_or_l2};
 
@@ -107,7 +109,7 @@ impl Discriminator {
 pub struct Vdmgnn {
     config: VdmgnnConfig,
     nodes: usize,
-    encoders: Vec<MultiScaleEncoder>,
+    encoder: MultiScaleEncoder,
     temporal: TemporalConv,
     to_mean: Linear,
     to_logvar: Linear,
@@ -127,11 +129,8 @@ impl Vdmgnn {
         }
         let c = &config.dmgnn;
         let p = Params::new(seed);
-        let n_enc = if c.vel_acc { 3 } else { 1 };
-        let encoders = (0..n_enc)
-            .map(|i| MultiScaleEncoder::new(&p, &format!("enc{i}"), graph, c, 3))
-            .collect::<Result<Vec<_>>>()?;
-        let c4 = n_enc * c.channels[3];
+        let encoder = MultiScaleEncoder::new(&p, "enc", graph, c, encoder_channels(c.vel_acc))?;
+        let c4 = c.channels[3];
         let disc_params = Params::new(seed ^ 0xd15c);
         Ok(Vdmgnn {
             temporal: TemporalConv::new(&p, "temporal", c4, c4, 5, 1)?,
@@ -140,7 +139,7 @@ impl Vdmgnn {
             to_state: Linear::new(&p, "to_state", config.latent, c.hidden)?,
             decoder: GgruDecoder::new(&p, "dec", graph, c.hidden)?,
             discriminator: Discriminator::new(&disc_params, graph, config.discriminator_hidden)?,
-            encoders,
+            encoder,
             nodes: graph.nodes(),
             config: config.clone(),
             params: p,
@@ -167,17 +166,10 @@ impl Vdmgnn {
 
     /// Per-node latent mean and log-variance `(B, V, Z)` of observed `(B, T, V, 3)`.
     fn encode(&self, x: &Tensor) -> Result<(Tensor, Tensor)> {
-        let mut seqs = vec![self.encoders[0].forward(x)?.1];
-        if self.config.dmgnn.vel_acc {
-            let (v, a) = differences(x)?;
-            seqs.push(self.encoders[1].forward(&v)?.1);
-            seqs.push(self.encoders[2].forward(&a)?.1);
-        }
-        let h = self
-            .temporal
-            .forward(&Tensor::cat(&seqs, D::Minus1)?)?
-            .relu()?
-            .mean(1)?;
+        let (_, seq) = self
+            .encoder
+            .forward(&encoder_input(x, self.config.dmgnn.vel_acc)?)?;
+        let h = self.temporal.forward(&seq)?.relu()?.mean(1)?;
         Ok((self.to_mean.forward(&h)?, self.to_logvar.forward(&h)?))
     }
 
