@@ -22,6 +22,7 @@
 //! (`motionaug eval`) parses arguments and prints.
 
 pub mod augment;
+pub mod cmu_dmgnn;
 pub mod dataset;
 pub mod dtw;
 pub mod error;
