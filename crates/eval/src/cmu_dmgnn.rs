@@ -190,6 +190,14 @@ static USED_DIMS: [usize; 78] = {
     out
 };
 
+/// The reference's lower-body mask (V-DMGNN-GAN, `lower_body_joints`):
+/// indices into the 26 used triplets ([`used_joints`]) = `ltibia`, `lfoot`,
+/// `ltoes`, every observed frame, in normalised units, occluded values
+/// replaced by `N(0, 0.5^2)` noise. Both whole legs (`lfemur` .. `rtoes`, what
+/// a name-based lower body gives) are used triplets `0..8`, an alternative
+/// left commented out in the reference.
+pub const REFERENCE_LOWER_BODY_USED: [usize; 3] = [1, 2, 3];
+
 /// The 78 dims (of 117) the reference predicts, ascending: whole triplets.
 pub fn used_dims() -> &'static [usize] {
     &USED_DIMS
@@ -1039,6 +1047,17 @@ mod tests {
         assert_eq!(&names[..4], &["lfemur", "ltibia", "lfoot", "ltoes"]);
         assert!(!names.contains(&"root") && !names.contains(&"lclavicle"));
         assert!(names.contains(&"lhumerus") && names.contains(&"rthumb"));
+        let lower: Vec<&str> = REFERENCE_LOWER_BODY_USED
+            .iter()
+            .map(|&i| names[i])
+            .collect();
+        assert_eq!(lower, ["ltibia", "lfoot", "ltoes"]);
+        assert_eq!(
+            &names[..8],
+            &[
+                "lfemur", "ltibia", "lfoot", "ltoes", "rfemur", "rtibia", "rfoot", "rtoes"
+            ]
+        );
     }
 
     #[test]
