@@ -54,8 +54,10 @@ pub const PREDICTED: usize = 10;
 pub const WINDOWS: usize = 8;
 /// Seed of the test windows' generator (a new generator per action).
 pub const WINDOW_SEED: u32 = 1_234_567_890;
-/// Reported horizons (ms) and the 0-based output frames they are read at.
+/// Reported horizons (ms) of V-DMGNN-GAN's Table 1.
 pub const REPORTED_MS: [u32; 3] = [40, 240, 400];
+/// The 0-based output frames they are read at (output frame `k` is
+/// `40 (k + 1)` ms; 1-based frames 1, 6, 10).
 pub const REPORTED_FRAMES: [usize; 3] = [0, 5, 9];
 /// Training dims whose standard deviation is below this are "constant": their
 /// std is set to 1 and they are left out of the metric.
