@@ -782,6 +782,33 @@ impl CmuDmgnnSet {
             .collect())
     }
 
+    /// A training window as the reference samples one (`train_sample`): a
+    /// training sequence chosen uniformly (not by length), then a start
+    /// uniform in `0 .. T_even - 60` of its kept frames. Sequences too short
+    /// for a window are skipped (none is in the shared copy: the shortest has
+    /// 76 kept frames).
+    pub fn sample_train_window(&self, rng: &mut impl rand::Rng) -> Result<Window> {
+        let span = OBSERVED + PREDICTED;
+        let long: Vec<&Sequence> = self
+            .train
+            .iter()
+            .filter(|s| s.frames.len() > span)
+            .collect();
+        if long.is_empty() {
+            return Err(EvalError::Data(format!(
+                "no training sequence has more than {span} kept frames"
+            )));
+        }
+        let seq = long[rng.random_range(0..long.len())];
+        let start = rng.random_range(0..seq.frames.len() - span);
+        Ok(Window {
+            action: seq.action.clone(),
+            start,
+            observed: seq.frames[start..start + OBSERVED].to_vec(),
+            target: seq.frames[start + OBSERVED..start + span].to_vec(),
+        })
+    }
+
     /// The reference's mean angle error of one window, per predicted frame
     /// (radians). Both sides are seen as the reference sees them
     /// ([`Self::as_seen`]), every triplet is turned to Euler angles
@@ -1274,6 +1301,26 @@ mod tests {
             );
         }
         assert_eq!(back[1], set.mean()[1]);
+        // Training windows: inside their sequence, every action drawn.
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut seen = std::collections::BTreeSet::new();
+        for _ in 0..200 {
+            let w = set.sample_train_window(&mut rng).unwrap();
+            assert_eq!((w.observed.len(), w.target.len()), (OBSERVED, PREDICTED));
+            let seqs: Vec<&Sequence> = set
+                .train()
+                .iter()
+                .filter(|s| s.action == w.action)
+                .collect();
+            assert!(
+                seqs.iter()
+                    .any(|s| s.frames.get(w.start) == Some(&w.observed[0])
+                        && s.frames.get(w.start + OBSERVED + PREDICTED - 1) == w.target.last())
+            );
+            seen.insert(w.action);
+        }
+        assert_eq!(seen.len(), 5);
     }
 
     #[test]
