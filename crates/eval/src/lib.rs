@@ -10,6 +10,9 @@
 //!   prediction model (GRU seq2seq or DCT + GCN) with and without augmented clips,
 //!   report the Euler-angle error at 100, 200 and 400 ms; [`options`]: how
 //!   its models are trained.
+//! * [`cmu_dmgnn`]: the CMU data set as preprocessed for DMGNN (exponential
+//!   maps, text) and the exact test protocol of DMGNN / V-DMGNN-GAN on it
+//!   (test windows from numpy's `RandomState`, the Euler mean angle error).
 //! * [`augment`]: where synthesised clips come from (a recipe run in memory by
 //!   the `pipeline` crate, or the motion VAE); [`scores`]: min DTW, MMD and
 //!   plausibility of a synthesised set.
@@ -22,6 +25,7 @@
 //! (`motionaug eval`) parses arguments and prints.
 
 pub mod augment;
+pub mod cmu_dmgnn;
 pub mod dataset;
 pub mod dtw;
 pub mod error;
