@@ -897,6 +897,19 @@ pub fn reported(per_frame: &[f64]) -> [f64; 3] {
     REPORTED_FRAMES.map(|k| per_frame.get(k).copied().unwrap_or(f64::NAN))
 }
 
+/// The shared copy of the data for tests (`../shared/data/cmu_dmgnn` beside
+/// the repository), or `None` with a note when it is missing.
+#[cfg(test)]
+pub(crate) fn test_data_root() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu_dmgnn");
+    if dir.join("train").is_dir() && dir.join("test").is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("note: {} missing, test skipped", dir.display());
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -904,13 +917,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn data_root() -> Option<PathBuf> {
-        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu_dmgnn");
-        if dir.join("train").is_dir() && dir.join("test").is_dir() {
-            Some(dir)
-        } else {
-            eprintln!("note: {} missing, test skipped", dir.display());
-            None
-        }
+        test_data_root()
     }
 
     fn complete_set() -> Option<CmuDmgnnSet> {

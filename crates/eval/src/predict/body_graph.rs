@@ -101,9 +101,9 @@ impl BodyGraph {
             if skeleton.parent(top).is_none() {
                 continue;
             }
-            for j in 0..n {
-                if limb_of[j].is_none() && skeleton.ancestors(j).contains(&top) {
-                    limb_of[j] = Some(limbs);
+            for (j, limb) in limb_of.iter_mut().enumerate() {
+                if limb.is_none() && skeleton.ancestors(j).contains(&top) {
+                    *limb = Some(limbs);
                 }
             }
             limbs += 1;

@@ -215,8 +215,8 @@ impl MultiScaleEncoder {
         let mut fuse_jp = Vec::new();
         let mut fuse_pb = Vec::new();
         let mut t = cfg.input_frames;
-        for i in 0..FUSIONS {
-            t = t.div_ceil(STRIDES[i]);
+        for (i, stride) in STRIDES.iter().enumerate().take(FUSIONS) {
+            t = t.div_ceil(*stride);
             let c = cfg.channels[i];
             fuse_jp.push(CrossScaleFusion::new(
                 p,

@@ -19,6 +19,7 @@
 
 pub mod bench;
 pub mod body_graph;
+pub mod cmu;
 pub mod data;
 pub mod dct;
 pub mod dmgnn;

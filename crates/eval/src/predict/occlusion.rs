@@ -68,7 +68,13 @@ pub struct Occluder {
 
 impl Occluder {
     pub fn new(kind: MaskKind, graph: &BodyGraph) -> Result<Occluder> {
-        let lower: Vec<bool> = graph.lower_body.iter().flat_map(|&l| [l, l, l]).collect();
+        Occluder::with_lower_nodes(kind, &graph.lower_body)
+    }
+
+    /// With another choice of lower-body nodes (the CMU protocol's reference
+    /// lower body, [`crate::cmu_dmgnn::REFERENCE_LOWER_BODY_USED`]).
+    pub fn with_lower_nodes(kind: MaskKind, lower_nodes: &[bool]) -> Result<Occluder> {
+        let lower: Vec<bool> = lower_nodes.iter().flat_map(|&l| [l, l, l]).collect();
         if kind == MaskKind::Lower && !lower.contains(&true) {
             return Err(EvalError::Config(
                 "lower-body mask: no lower-body joint among the features (no feet found)".into(),
