@@ -45,6 +45,8 @@ enum Command {
     Debias(commands::debias::Args),
     /// Evaluate augmentations: min DTW / MMD, and motion prediction with and without them.
     Eval(commands::eval::Args),
+    /// Motion prediction models: train one on clips, predict a clip's future from occluded frames.
+    Predict(commands::predict::Args),
     /// Serve the viewer page for augment outputs or clips: play them in 3D, see corrections' curves.
     View(commands::view::Args),
 }
@@ -70,6 +72,7 @@ fn main() -> ExitCode {
         Command::Debias(args) => commands::debias::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::View(args) => commands::view::run(args),
+        Command::Predict(args) => commands::predict::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

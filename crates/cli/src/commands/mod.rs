@@ -9,5 +9,6 @@ pub mod eval;
 pub mod inspect;
 pub mod interaction;
 pub mod metrics;
+pub mod predict;
 pub mod vae;
 pub mod view;

@@ -140,7 +140,7 @@ impl ClipSet {
 }
 
 /// Per-feature mean and standard deviation (floored), from training frames.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Normalizer {
     pub mean: Vec<f32>,
     pub std: Vec<f32>,
@@ -179,7 +179,7 @@ impl Normalizer {
         }
     }
 
-    fn norm(&self, frame: &[f32], out: &mut Vec<f32>) {
+    pub fn norm(&self, frame: &[f32], out: &mut Vec<f32>) {
         out.extend(
             frame
                 .iter()

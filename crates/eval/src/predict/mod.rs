@@ -13,6 +13,9 @@
 //!   V-DMGNN-GAN (multi-scale graph encoders over the skeleton, graph-GRU
 //!   decoders; the second variational with a recurrent discriminator).
 //! * [`occlusion`]: the lower-body and random masks on observed features.
+//! * [`cmu`]: V-DMGNN-GAN's Table 1 protocol on DMGNN's CMU data.
+//! * [`trained`]: a model as a folder (`predict train` / `predict run`).
+//! * [`bench`]: training cost per iteration.
 //!
 //! The models are built from the `nn` crate's seeded parameter store and layers.
 //! * [`protocol`]: one leave-one-actor-out run: train, predict, score.
@@ -29,6 +32,7 @@ pub mod occlusion;
 pub mod protocol;
 pub mod seq2seq;
 pub mod train;
+pub mod trained;
 pub mod vdmgnn;
 
 use candle_core::Tensor;

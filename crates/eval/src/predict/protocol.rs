@@ -313,7 +313,7 @@ fn horizons(sums: [f64; HORIZONS_MS.len()], n: usize) -> Horizons {
         .collect()
 }
 
-fn build(
+pub(crate) fn build(
     config: &ProtocolConfig,
     graph: &BodyGraph,
     dim: usize,
