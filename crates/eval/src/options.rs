@@ -30,6 +30,8 @@ pub struct TrainOptions {
     pub gcn_stages: usize,
     /// Occlusion of the observed frames (V-DMGNN-GAN's masks), training and test.
     pub mask: MaskKind,
+    /// Occlusion in training when it differs from `mask` (the mask augmentation).
+    pub train_mask: Option<MaskKind>,
     /// DMGNN / V-DMGNN-GAN reconstruction loss.
     pub graph_loss: Reconstruction,
     /// V-DMGNN-GAN: encode velocities and accelerations too.
@@ -50,6 +52,7 @@ impl Default for TrainOptions {
             gcn_hidden: sizes.gcn_hidden,
             gcn_stages: sizes.gcn_stages,
             mask: MaskKind::None,
+            train_mask: None,
             graph_loss: Reconstruction::L1,
             vel_acc: false,
         }
@@ -64,6 +67,7 @@ impl TrainOptions {
         c.sizes.gcn_hidden = self.gcn_hidden;
         c.sizes.gcn_stages = self.gcn_stages;
         c.mask = self.mask;
+        c.train_mask = self.train_mask;
         c.graph = GraphOptions {
             loss: self.graph_loss,
             vel_acc: self.vel_acc,

@@ -329,6 +329,11 @@ struct TrainArgs {
     /// (every lower-body joint) or random (each angle visible with p = 0.8).
     #[arg(long, default_value_t = TrainOptions::default().mask)]
     mask: MaskKind,
+    /// Occlusion of the training frames when it differs from --mask:
+    /// `--mask lower --train-mask none` is a model never shown occlusion, the
+    /// baseline of the mask augmentation.
+    #[arg(long)]
+    train_mask: Option<MaskKind>,
     /// Reconstruction loss of dmgnn / vdmgnn: l1 or l2.
     #[arg(long, default_value_t = TrainOptions::default().graph_loss)]
     loss: Reconstruction,
@@ -350,6 +355,7 @@ impl TrainArgs {
             gcn_hidden: self.gcn_hidden,
             gcn_stages: self.gcn_stages,
             mask: self.mask,
+            train_mask: self.train_mask,
             graph_loss: self.loss,
             vel_acc: self.vel_acc,
         }
@@ -404,6 +410,7 @@ fn run_predict(args: PredictArgs) -> anyhow::Result<()> {
         "test_actor": args.fold.test_actor,
         "model": args.model,
         "mask": config.mask,
+        "train_mask": config.train_mask.unwrap_or(config.mask),
         "augmentation": aug.as_ref().map(|a| a.label()),
         "train_files": split.train_files.iter().map(|f| &f.name).collect::<Vec<_>>(),
         "test_files": split.test_files.iter().map(|f| &f.name).collect::<Vec<_>>(),

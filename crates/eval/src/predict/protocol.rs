@@ -156,9 +156,14 @@ pub struct ProtocolConfig {
     /// Caps (evenly spaced) on training and test windows; `None`: all.
     pub max_train_windows: Option<usize>,
     pub max_test_windows: Option<usize>,
-    /// Occlusion of the observed frames, in training and test alike.
+    /// Occlusion of the observed test frames (and of training frames unless
+    /// `train_mask` says otherwise).
     #[serde(default)]
     pub mask: MaskKind,
+    /// Occlusion of the observed training frames (the mask augmentation);
+    /// `None`: the same as `mask`.
+    #[serde(default)]
+    pub train_mask: Option<MaskKind>,
     #[serde(default)]
     pub graph: GraphOptions,
 }
@@ -174,6 +179,7 @@ impl ProtocolConfig {
             max_train_windows: None,
             max_test_windows: None,
             mask: MaskKind::None,
+            train_mask: None,
             graph: GraphOptions::default(),
         }
     }
@@ -377,6 +383,7 @@ pub fn evaluate(
     let (mut first, mut last) = (0.0, 0.0);
     for &seed in &config.seeds {
         let model = build(config, &test.graph, set.dim, seed)?;
+        let train_occluder = Occluder::new(config.train_mask.unwrap_or(config.mask), &test.graph)?;
         if set.windows.is_empty() {
             return Err(EvalError::Data(
                 "no training windows (every clip is shorter than a window)".into(),
@@ -387,7 +394,7 @@ pub fn evaluate(
             model.as_ref(),
             &config.train,
             seed,
-            Some(&test.occluder),
+            Some(&train_occluder),
             |rng| {
                 let picks: Vec<(usize, usize)> = (0..config.train.batch_size)
                     .map(|_| windows[rng.random_range(0..windows.len())])
