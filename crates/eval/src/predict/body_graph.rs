@@ -297,14 +297,7 @@ mod tests {
     use super::*;
 
     fn hdm05() -> Skeleton {
-        motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap()
-        .skeleton()
-        .as_ref()
-        .clone()
+        crate::predict::test_support::hdm05_skeleton()
     }
 
     #[test]

@@ -427,12 +427,7 @@ mod tests {
 
     #[test]
     fn shapes_loss_and_gradients_reach_every_encoder() {
-        let s = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        let g = BodyGraph::non_root(s.skeleton()).unwrap();
+        let g = crate::predict::test_support::hdm05_graph();
         let mut cfg = DmgnnConfig::new(10);
         cfg.channels = [4, 8, 8, 8];
         cfg.hidden = 8;

@@ -285,12 +285,7 @@ mod tests {
     use candle_core::DType;
 
     fn graph() -> BodyGraph {
-        let s = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        BodyGraph::non_root(s.skeleton()).unwrap()
+        crate::predict::test_support::hdm05_graph()
     }
 
     #[test]

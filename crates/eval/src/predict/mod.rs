@@ -83,3 +83,24 @@ pub(crate) fn l1_or_l2(kind: dmgnn::Reconstruction, a: &Tensor, b: &Tensor) -> R
 pub(crate) fn mse(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     Ok((a - b)?.sqr()?.mean_all()?)
 }
+
+/// The bundled HDM05 skeleton and its feature graph, for the models' tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::body_graph::BodyGraph;
+
+    pub fn hdm05_skeleton() -> motion::Skeleton {
+        motion::asf::parse(
+            include_bytes!("../../../../examples/data/HDM_bd.asf"),
+            "HDM_bd.asf",
+        )
+        .expect("the bundled skeleton parses")
+        .skeleton()
+        .as_ref()
+        .clone()
+    }
+
+    pub fn hdm05_graph() -> BodyGraph {
+        BodyGraph::non_root(&hdm05_skeleton()).expect("the bundled skeleton has limbs")
+    }
+}

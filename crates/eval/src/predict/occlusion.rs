@@ -137,12 +137,7 @@ mod tests {
 
     #[test]
     fn lower_hides_the_legs_and_random_about_a_fifth() {
-        let s = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        let g = BodyGraph::non_root(s.skeleton()).unwrap();
+        let g = crate::predict::test_support::hdm05_graph();
         let d = 3 * g.nodes();
         let x = Tensor::ones((4, 10, d), candle_core::DType::F32, &Device::Cpu).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(1);

@@ -284,12 +284,7 @@ mod tests {
 
     #[test]
     fn generator_and_discriminator_losses_reach_their_own_parameters() {
-        let s = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        let g = BodyGraph::non_root(s.skeleton()).unwrap();
+        let g = crate::predict::test_support::hdm05_graph();
         let mut cfg = VdmgnnConfig::new(10);
         cfg.dmgnn.channels = [4, 8, 8, 8];
         cfg.dmgnn.hidden = 8;
