@@ -9,8 +9,8 @@ use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::{self, Next};
 use axum::response::Response;
 use axum::{Extension, Router};
-use sqlx::PgPool;
 use sqlx::postgres::PgPoolOptions;
+use sqlx::{Connection, PgPool};
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 
@@ -36,17 +36,36 @@ pub struct AppState {
     pub keys: KeyCache,
 }
 
+/// A pooled connection idle this long is checked (a round trip) before use.
+const PING_IF_IDLE_FOR: Duration = Duration::from_secs(30);
+
+/// The pool's settings. sqlx checks every connection it hands out with a
+/// round trip to Postgres by default, which doubles the round trips of a
+/// one-query request such as a status poll; here only a connection idle for
+/// [`PING_IF_IDLE_FOR`] is checked. (A connection that broke sooner, say by
+/// a Postgres restart, fails the one request that meets it ("try again", 500), and
+/// sqlx drops it.)
+fn pool_options(pool_size: u32) -> PgPoolOptions {
+    PgPoolOptions::new()
+        .max_connections(pool_size)
+        .acquire_timeout(Duration::from_secs(5))
+        .test_before_acquire(false)
+        .before_acquire(|conn, meta| {
+            Box::pin(async move {
+                if meta.idle_for >= PING_IF_IDLE_FOR {
+                    conn.ping().await?;
+                }
+                Ok(true)
+            })
+        })
+}
+
 /// Connects to Postgres, waiting up to a minute for it to come up (containers
 /// start in any order), and applies the migrations.
 pub async fn connect_and_migrate(database_url: &str, pool_size: u32) -> anyhow::Result<PgPool> {
     let deadline = Instant::now() + Duration::from_secs(60);
     let db = loop {
-        match PgPoolOptions::new()
-            .max_connections(pool_size)
-            .acquire_timeout(Duration::from_secs(5))
-            .connect(database_url)
-            .await
-        {
+        match pool_options(pool_size).connect(database_url).await {
             Ok(db) => break db,
             Err(e) if Instant::now() < deadline => {
                 tracing::warn!(error = %e, "database not reachable yet; retrying");

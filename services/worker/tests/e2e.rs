@@ -60,6 +60,9 @@ fn main() {
         ("worker_killed_mid_correction", || {
             block_on(worker_killed_mid_correction())
         }),
+        ("live_curve_reaches_the_viewer", || {
+            block_on(live_curve_reaches_the_viewer())
+        }),
         ("class_tracker_on_two_workers", || {
             block_on(class_tracker_on_two_workers())
         }),
@@ -464,13 +467,18 @@ impl Cluster {
     }
 
     async fn status(&self, aug: &str) -> anyhow::Result<Value> {
+        self.get_json(&format!("/v1/augmentations/{aug}")).await
+    }
+
+    /// An authenticated GET of the public API, as JSON.
+    async fn get_json(&self, path: &str) -> anyhow::Result<Value> {
         let r = self
             .http
-            .get(self.url(&format!("/v1/augmentations/{aug}")))
+            .get(self.url(path))
             .bearer_auth(&self.key)
             .send()
             .await?;
-        ensure!(r.status().is_success(), "status: {}", r.status());
+        ensure!(r.status().is_success(), "{path}: {}", r.status());
         Ok(r.json().await?)
     }
 
@@ -1260,6 +1268,117 @@ async fn npz_and_static_root_clips() -> anyhow::Result<()> {
             // The static root is written back above the Hips in every output.
             let mirrored = &got["static_root_walk__02_mirror_000.bvh"];
             ensure!(mirrored.starts_with(b"HIERARCHY\nROOT joint_Root\n"));
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// The learning curve a running correction reports reaches the viewer's
+/// library endpoint while it trains (the worker uploads `curve.json` as
+/// points come), and once it finishes the library serves the report's curve,
+/// of which the live points are the start: the same rollouts, not a stand-in.
+async fn live_curve_reaches_the_viewer() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            // R_norm 1 is never reached: the correction trains its whole budget,
+            // a point per PPO iteration (several seconds each on a loaded
+            // machine: the budget leaves room for two or more).
+            let recipe = json!({
+                "seed": 5,
+                "ops": [{"op": "mirror"}],
+                "correct": {"time_budget_s": 20, "envs": 2, "target_r_norm": 1,
+                            "accept_threshold": 0, "keep_rejected": true,
+                            "warm_start": false}
+            });
+            let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
+            let library = format!("/v1/augmentations/{aug}/library");
+            let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
+            let key = format!("correct:{clip}");
+            // The longest curve seen while the job was still running.
+            let mut live: Vec<[f64; 3]> = Vec::new();
+            let deadline = Instant::now() + Duration::from_secs(180);
+            loop {
+                let lib = c.get_json(&library).await?;
+                let job = lib["corrections"]
+                    .as_array()
+                    .and_then(|cs| cs.iter().find(|j| j["key"] == key.as_str()))
+                    .cloned();
+                let state = job.as_ref().map(|j| j["state"].clone());
+                if let Some(job) = job.as_ref().filter(|_| state == Some(json!("running"))) {
+                    let curve: Vec<[f64; 3]> = serde_json::from_value(job["curve"].clone())?;
+                    // Once the report is stored (the job ends soon after) the
+                    // library serves its curve, which starts at 0 samples.
+                    let from_report = curve.first().is_some_and(|p| p[1] == 0.0);
+                    if !from_report && curve.len() > live.len() {
+                        live = curve;
+                    }
+                }
+                if matches!(
+                    state.as_ref().and_then(Value::as_str),
+                    Some("succeeded" | "failed")
+                ) {
+                    break;
+                }
+                ensure!(
+                    Instant::now() < deadline,
+                    "the correction did not finish; logs in {}",
+                    c.dir.display()
+                );
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            ensure!(
+                !live.is_empty(),
+                "no curve point reached the viewer while the correction ran; logs in {}",
+                c.dir.display()
+            );
+            c.wait_for(&aug, "succeeded", Duration::from_secs(60))
+                .await?;
+            // Finished: the library's curve is the report's, which starts with
+            // the untrained policy's rollout at (0 s, 0 samples).
+            let got = download(&c, &aug).await?;
+            let report: Value =
+                serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
+            let reported: Vec<[f64; 3]> = serde_json::from_value(report["curve"].clone())?;
+            let lib = c.get_json(&library).await?;
+            let job = lib["corrections"]
+                .as_array()
+                .and_then(|cs| cs.iter().find(|j| j["key"] == key.as_str()))
+                .context("the correction in the library")?;
+            let served: Vec<[f64; 3]> = serde_json::from_value(job["curve"].clone())?;
+            ensure!(
+                served == reported,
+                "library {served:?} vs report {reported:?}"
+            );
+            ensure!(
+                reported.len() > live.len() && reported[0][..2] == [0.0, 0.0],
+                "report {reported:?}, live {live:?}"
+            );
+            for (i, (l, r)) in live.iter().zip(&reported[1..]).enumerate() {
+                let close = l
+                    .iter()
+                    .zip(r)
+                    .all(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1.0));
+                ensure!(close, "live point {i} {l:?} is not the report's {r:?}");
+            }
+            // Real figures: time and samples grow, R_norm is a fraction.
+            for w in reported[1..].windows(2) {
+                ensure!(w[1][0] > w[0][0] && w[1][1] > w[0][1], "curve {reported:?}");
+            }
+            for [wall_s, samples, r_norm] in &reported[1..] {
+                ensure!(
+                    *wall_s > 0.0 && *samples >= 1.0 && *r_norm > 0.0 && *r_norm <= 1.0,
+                    "curve {reported:?}"
+                );
+            }
+            println!(
+                "  live curve: {} point(s) while running, {} in the report",
+                live.len(),
+                reported.len()
+            );
             Ok(())
         }
         .await;

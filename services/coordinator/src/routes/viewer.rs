@@ -15,7 +15,7 @@
 //! Prepared clips are cached in this process by content hash, so paging
 //! through a clip parses it once.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::Path as FsPath;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -26,7 +26,9 @@ use axum::response::{IntoResponse, Redirect, Response};
 use motionaug_protocol::{JobOutput, artifacts};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
-use utoipa::{IntoParams, ToSchema};
+use utoipa::openapi::path::{Parameter, ParameterBuilder, ParameterIn};
+use utoipa::openapi::{self, ContentBuilder, Object, Ref, RefOr, Required, ResponseBuilder};
+use utoipa::{IntoParams, IntoResponses, PartialSchema, ToSchema};
 use uuid::Uuid;
 use viewer::ClipView;
 use viewer::library::{Descriptor, Role, Urls};
@@ -267,15 +269,9 @@ type StoredClip = (String, Vec<u8>, Option<String>, Option<Vec<u8>>, f64);
     params(
         ("id" = Uuid, Path, description = "The dataset's id"),
         ("clip" = Uuid, Path, description = "The clip's id"),
-        ("part" = String, Path, description = "meta (JSON), frames (float32 [count, points, 3]) or flags (u8 [frames, points])"),
-        Page,
+        PartParams,
     ),
-    responses(
-        (status = 200, description = "The part", body = inline(Binary)),
-        (status = 400, response = Problem),
-        (status = 401, response = Problem),
-        (status = 404, response = Problem),
-    )
+    responses(PartResponses)
 )]
 pub async fn dataset_clip_view(
     State(state): State<AppState>,
@@ -284,29 +280,29 @@ pub async fn dataset_clip_view(
     Query(page): Query<Page>,
 ) -> Result<Response, ApiError> {
     datasets::find(&state, &tenant, id).await?;
-    let row: Option<StoredClip> = sqlx::query_as(
-        "SELECT source_name, source, skeleton_name, skeleton, fps FROM clips
-         WHERE id = $1 AND dataset_id = $2",
-    )
-    .bind(clip)
-    .bind(id)
-    .fetch_optional(&state.db)
-    .await?;
-    let (source_name, source, skeleton_name, skeleton, fps) =
-        row.ok_or_else(|| ApiError::not_found("clip"))?;
-    let key = format!("clip:{clip}");
-    let view = cached(&key, move || {
-        let options = motion::LoadOptions {
-            fps: Some(fps),
-            ..motion::LoadOptions::default()
-        };
-        let skeleton = skeleton_name.as_deref().zip(skeleton.as_deref());
-        let motion = motion::io::parse_named(&source_name, &source, skeleton, &options)
-            .map_err(|e| e.to_string())?;
-        ClipView::from_motion(&stem(&source_name), &motion, None).map_err(|e| e.to_string())
+    clip_part(format!("clip:{clip}"), &part, &page, async {
+        let row: Option<StoredClip> = sqlx::query_as(
+            "SELECT source_name, source, skeleton_name, skeleton, fps FROM clips
+             WHERE id = $1 AND dataset_id = $2",
+        )
+        .bind(clip)
+        .bind(id)
+        .fetch_optional(&state.db)
+        .await?;
+        let (source_name, source, skeleton_name, skeleton, fps) =
+            row.ok_or_else(|| ApiError::not_found("clip"))?;
+        Ok(move || {
+            let options = motion::LoadOptions {
+                fps: Some(fps),
+                ..motion::LoadOptions::default()
+            };
+            let skeleton = skeleton_name.as_deref().zip(skeleton.as_deref());
+            let motion = motion::io::parse_named(&source_name, &source, skeleton, &options)
+                .map_err(|e| e.to_string())?;
+            ClipView::from_motion(&stem(&source_name), &motion, None).map_err(|e| e.to_string())
+        })
     })
-    .await?;
-    part_response(&view, &part, &page)
+    .await
 }
 
 fn stem(name: &str) -> String {
@@ -600,16 +596,10 @@ fn group_of(entry: &Value) -> String {
     tag = "viewer",
     params(
         ("id" = Uuid, Path, description = "The augmentation's id"),
-        ("part" = String, Path, description = "meta (JSON), frames (float32 [count, points, 3]) or flags (u8 [frames, points])"),
         ("file" = String, Path, description = "The clip's file"),
-        Page,
+        PartParams,
     ),
-    responses(
-        (status = 200, description = "The part", body = inline(Binary)),
-        (status = 400, response = Problem),
-        (status = 401, response = Problem),
-        (status = 404, response = Problem),
-    )
+    responses(PartResponses)
 )]
 pub async fn augmentation_clip_view(
     State(state): State<AppState>,
@@ -626,25 +616,29 @@ pub async fn augmentation_clip_view(
             .await?;
     let sha = sha.ok_or_else(|| ApiError::not_found("file"))?;
     let key = format!("artifact:{id}:{}", hex(&sha));
-    if let Some(view) = cache_get(&key) {
-        return part_response(&view, &part, &page);
-    }
-    let content = artifact(&state, id, &file)
+    clip_part(key, &part, &page, load_output(&state, dataset, id, file)).await
+}
+
+/// What preparing an augmentation's clip `file` needs from the database
+/// (the file, the mask of an output, its manifest entry for the IK marks),
+/// and the preparation.
+async fn load_output(
+    state: &AppState,
+    dataset: Uuid,
+    id: Uuid,
+    file: String,
+) -> Result<impl FnOnce() -> Result<ClipView, String> + Send + 'static, ApiError> {
+    let content = artifact(state, id, &file)
         .await?
         .ok_or_else(|| ApiError::not_found("file"))?;
     let name = stem(&file);
     // An output's mask is in its NPZ; its IK edit in its manifest entry.
     let mask_npz = if file.ends_with(".bvh") {
-        artifact(
-            &state,
-            id,
-            &format!("{}.npz", file.trim_end_matches(".bvh")),
-        )
-        .await?
+        artifact(state, id, &format!("{}.npz", file.trim_end_matches(".bvh"))).await?
     } else {
         None
     };
-    let rows = jobs(&state, id).await?;
+    let rows = jobs(state, id).await?;
     let entry = rows.iter().find_map(|r| {
         let o = output_of(r);
         o.manifest
@@ -667,7 +661,7 @@ pub async fn augmentation_clip_view(
         }
         None => None,
     };
-    let view = cached(&key, move || {
+    Ok(move || {
         let (motion, mask) = if file.ends_with(".bvh") {
             let m = motion::io::parse_bvh(&content, &file, motion::Unit::Auto)
                 .map_err(|e| e.to_string())?;
@@ -708,8 +702,6 @@ pub async fn augmentation_clip_view(
         }
         Ok(view)
     })
-    .await?;
-    part_response(&view, &part, &page)
 }
 
 /// One stored file of an augmentation (a result, a correction report)
@@ -799,6 +791,78 @@ async fn cached(
         }
     }
     Ok(view)
+}
+
+/// The parts of a clip the page reads, and their query.
+const PARTS: [&str; 3] = ["meta", "frames", "flags"];
+
+/// `part` (a path parameter) and the page of frames (query), shared by both
+/// clip views.
+pub struct PartParams;
+
+impl IntoParams for PartParams {
+    fn into_params(_: impl Fn() -> Option<ParameterIn>) -> Vec<Parameter> {
+        let part = ParameterBuilder::new()
+            .name("part")
+            .parameter_in(ParameterIn::Path)
+            .required(Required::True)
+            .description(Some(
+                "meta (JSON), frames (float32 [count, points, 3]) or flags (u8 [frames, points])",
+            ))
+            .schema(Some(String::schema()))
+            .build();
+        std::iter::once(part)
+            .chain(Page::into_params(|| Some(ParameterIn::Query)))
+            .collect()
+    }
+}
+
+/// The answers of both clip views.
+pub struct PartResponses;
+
+impl IntoResponses for PartResponses {
+    fn responses() -> BTreeMap<String, RefOr<openapi::Response>> {
+        let part = ResponseBuilder::new()
+            .description("The part: meta in JSON, frames and flags in bytes")
+            .content(
+                "application/json",
+                ContentBuilder::new().schema(Some(Object::new())).build(),
+            )
+            .content(
+                "application/octet-stream",
+                ContentBuilder::new().schema(Some(Binary::schema())).build(),
+            )
+            .build();
+        let problem = || RefOr::Ref(Ref::from_response_name("Problem"));
+        BTreeMap::from([
+            ("200".to_string(), part.into()),
+            ("400".to_string(), problem()),
+            ("401".to_string(), problem()),
+            ("404".to_string(), problem()),
+        ])
+    }
+}
+
+/// A clip's `part` from the cache under `key`, or prepared (off the async
+/// threads) by what `load` reads from the database; an unknown part is
+/// "not found" before anything is read.
+async fn clip_part<P>(
+    key: String,
+    part: &str,
+    page: &Page,
+    load: impl Future<Output = Result<P, ApiError>>,
+) -> Result<Response, ApiError>
+where
+    P: FnOnce() -> Result<ClipView, String> + Send + 'static,
+{
+    if !PARTS.contains(&part) {
+        return Err(ApiError::not_found("part (meta, frames or flags)"));
+    }
+    let view = match cache_get(&key) {
+        Some(view) => view,
+        None => cached(&key, load.await?).await?,
+    };
+    part_response(&view, part, page)
 }
 
 fn part_response(view: &ClipView, part: &str, page: &Page) -> Result<Response, ApiError> {

@@ -309,7 +309,12 @@ impl RealCoordinator {
     /// Starts it with `env` on top of the required settings (the default
     /// limits otherwise) and waits until it answers.
     pub async fn start(env: &[(&str, &str)]) -> RealCoordinator {
-        let binary = env!("CARGO_BIN_EXE_motionaug-coordinator");
+        Self::start_binary(env!("CARGO_BIN_EXE_motionaug-coordinator"), env).await
+    }
+
+    /// [`RealCoordinator::start`] of another build of the coordinator (a
+    /// benchmark's baseline).
+    pub async fn start_binary(binary: &str, env: &[(&str, &str)]) -> RealCoordinator {
         let (db_name, database_url) = create_database().await;
         let key = std::process::Command::new(binary)
             .args(["create-key", "--tenant", "measured"])
@@ -357,6 +362,39 @@ impl RealCoordinator {
 
     pub fn pid(&self) -> u32 {
         self.child.id()
+    }
+
+    /// CPU seconds used so far by the process and by the Postgres backends of
+    /// its database (Linux `/proc`; backends that exited are not counted).
+    pub fn cpu_seconds(&self) -> (f64, f64) {
+        let ticks = |pid: &str| -> f64 {
+            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+            let fields: Vec<&str> = stat
+                .rsplit_once(')')
+                .map_or(Vec::new(), |(_, rest)| rest.split_whitespace().collect());
+            // utime and stime: fields 14 and 15 of stat(5), counted from the state (3).
+            let at = |i: usize| {
+                fields
+                    .get(i)
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .unwrap_or(0.0)
+            };
+            (at(11) + at(12)) / 100.0
+        };
+        let own = ticks(&self.pid().to_string());
+        let mut postgres = 0.0;
+        for entry in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+            let pid = entry.file_name().to_string_lossy().into_owned();
+            if !pid.bytes().all(|b| b.is_ascii_digit()) {
+                continue;
+            }
+            let title = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            let title = String::from_utf8_lossy(&title);
+            if title.starts_with("postgres: ") && title.contains(&format!(" {} ", self.db_name)) {
+                postgres += ticks(&pid);
+            }
+        }
+        (own, postgres)
     }
 
     /// Kills the process and drops its database.

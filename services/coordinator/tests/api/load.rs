@@ -147,6 +147,13 @@ async fn fixed_rate(
 /// Run by hand:
 /// `cargo test --release -p motionaug-coordinator --test api -- --ignored status_polling --nocapture`
 /// (STATUS_RATES="200,1000", STATUS_SECONDS=10 change it).
+///
+/// Side by side: with `STATUS_BASELINE=<another motionaug-coordinator
+/// binary>` (e.g. one built from an earlier commit) both servers run, each
+/// on its own database, and every measurement is taken from one then the
+/// other, `STATUS_ROUNDS` times (default 3), so that the load others put on
+/// the machine falls on both alike; the medians of the rounds are printed
+/// with the ratio baseline / this build.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "load benchmark: run by hand"]
 async fn status_polling_benchmark() {
@@ -159,11 +166,117 @@ async fn status_polling_benchmark() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(10.0);
-    let server = RealCoordinator::start(&[("MOTIONAUG_MAX_FILES", "100")]).await;
+    let baseline = std::env::var("STATUS_BASELINE").ok();
+    let rounds: usize = match &baseline {
+        Some(_) => std::env::var("STATUS_ROUNDS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(3),
+        None => 1,
+    };
     let http = reqwest::Client::builder()
         .pool_max_idle_per_host(256)
         .build()
         .unwrap();
+    let env = [("MOTIONAUG_MAX_FILES", "100")];
+    let mut servers = Vec::new();
+    if let Some(binary) = &baseline {
+        let server = RealCoordinator::start_binary(binary, &env).await;
+        let url = polled_augmentation(&http, &server).await;
+        servers.push(("baseline", server, url));
+    }
+    let server = RealCoordinator::start(&env).await;
+    let url = polled_augmentation(&http, &server).await;
+    servers.push(("this build", server, url));
+    let status: Value = http
+        .get(&servers[0].2)
+        .bearer_auth(&servers[0].1.key)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let jobs = status["jobs"]["total"].as_i64().unwrap();
+    for (_, server, url) in &servers {
+        fixed_rate(&http, url, &server.key, 200.0, 2.0).await;
+    }
+
+    // (server, measurement) -> one figure per round.
+    let mut figures: BTreeMap<(usize, String), Vec<[f64; 2]>> = BTreeMap::new();
+    for round in 0..rounds {
+        for &rate in &rates {
+            for (s, (name, server, url)) in servers.iter().enumerate() {
+                let cpu = server.cpu_seconds();
+                let (p50, p99, max, failed) =
+                    fixed_rate(&http, url, &server.key, rate, seconds).await;
+                let after = server.cpu_seconds();
+                // CPU per request (µs): the coordinator's and its Postgres backends'.
+                let per_request = |a: f64, b: f64| (b - a) * 1e6 / (rate * seconds);
+                let (own_us, pg_us) = (per_request(cpu.0, after.0), per_request(cpu.1, after.1));
+                println!(
+                    "[round {round}] {name}: status poll ({jobs} jobs), {rate:.0} req/s for \
+                     {seconds:.0} s (open loop): p50 {p50:.2} ms, p99 {p99:.2} ms, max {max:.1} ms, \
+                     {failed} failed; CPU per request: coordinator {own_us:.0} µs, \
+                     Postgres {pg_us:.0} µs"
+                );
+                assert_eq!(failed, 0);
+                figures
+                    .entry((s, format!("{rate:>5.0} req/s p50 / p99 ms")))
+                    .or_default()
+                    .push([p50, p99]);
+                figures
+                    .entry((
+                        s,
+                        format!("{rate:>5.0} req/s CPU µs coordinator / Postgres"),
+                    ))
+                    .or_default()
+                    .push([own_us, pg_us]);
+            }
+        }
+        for (s, (name, server, url)) in servers.iter().enumerate() {
+            let (throughput, p50, p99) = closed_loop(&http, url, &server.key, seconds).await;
+            println!(
+                "[round {round}] {name}: status poll ({jobs} jobs), 64 in flight for {seconds:.0} s \
+                 (closed loop): {throughput:.0} req/s, p50 {p50:.2} ms, p99 {p99:.2} ms"
+            );
+            figures
+                .entry((s, "   64 in flight req/s / p99 ms".to_string()))
+                .or_default()
+                .push([throughput, p99]);
+        }
+    }
+    if servers.len() == 2 {
+        let median = |v: &[[f64; 2]], i: usize| {
+            let mut x: Vec<f64> = v.iter().map(|f| f[i]).collect();
+            x.sort_by(f64::total_cmp);
+            x[x.len() / 2]
+        };
+        println!("\nmedians of {rounds} rounds, baseline vs this build (ratio baseline / this):");
+        for ((s, what), base) in figures.iter().filter(|((s, _), _)| *s == 0) {
+            let ours = &figures[&(s + 1, what.clone())];
+            let (b0, b1, o0, o1) = (
+                median(base, 0),
+                median(base, 1),
+                median(ours, 0),
+                median(ours, 1),
+            );
+            println!(
+                "{what}: baseline {b0:.2} / {b1:.2}, this build {o0:.2} / {o1:.2} \
+                 (ratios {:.2} / {:.2})",
+                b0 / o0,
+                b1 / o1
+            );
+        }
+    }
+    for (_, server, _) in servers {
+        server.stop();
+    }
+}
+
+/// Uploads 50 clips to `server` and starts an augmentation of 250 jobs on
+/// them; returns the URL of its status.
+async fn polled_augmentation(http: &reqwest::Client, server: &RealCoordinator) -> String {
     let clip = bvh(60);
     let mut form = Form::new();
     for i in 0..50 {
@@ -196,37 +309,25 @@ async fn status_polling_benchmark() {
         .unwrap();
     assert_eq!(r.status(), StatusCode::ACCEPTED);
     let aug: Value = r.json().await.unwrap();
-    let url = format!(
+    format!(
         "{}/v1/augmentations/{}",
         server.base,
         aug["id"].as_str().unwrap()
-    );
-    let status: Value = http
-        .get(&url)
-        .bearer_auth(&server.key)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    let jobs = status["jobs"]["total"].as_i64().unwrap();
+    )
+}
 
-    fixed_rate(&http, &url, &server.key, 200.0, 2.0).await;
-    for rate in rates {
-        let (p50, p99, max, failed) = fixed_rate(&http, &url, &server.key, rate, seconds).await;
-        println!(
-            "status poll ({jobs} jobs), {rate:.0} req/s for {seconds:.0} s (open loop): \
-             p50 {p50:.2} ms, p99 {p99:.2} ms, max {max:.1} ms, {failed} failed"
-        );
-        assert_eq!(failed, 0);
-    }
-    // Closed loop: 64 requests in flight for `seconds`.
+/// 64 requests in flight for `seconds`: (req/s, p50 ms, p99 ms).
+async fn closed_loop(
+    http: &reqwest::Client,
+    url: &str,
+    key: &str,
+    seconds: f64,
+) -> (f64, f64, f64) {
     let started = std::time::Instant::now();
     let deadline = started + Duration::from_secs_f64(seconds);
     let mut tasks = tokio::task::JoinSet::new();
     for _ in 0..64 {
-        let (http, url, key) = (http.clone(), url.clone(), server.key.clone());
+        let (http, url, key) = (http.clone(), url.to_string(), key.to_string());
         tasks.spawn(async move {
             let mut latencies = Vec::new();
             while std::time::Instant::now() < deadline {
@@ -244,12 +345,9 @@ async fn status_polling_benchmark() {
         latencies.extend(r.unwrap());
     }
     latencies.sort();
-    println!(
-        "status poll ({jobs} jobs), 64 in flight for {seconds:.0} s (closed loop): {:.0} req/s, \
-         p50 {:.2} ms, p99 {:.2} ms",
+    (
         latencies.len() as f64 / started.elapsed().as_secs_f64(),
         percentile(&latencies, 0.50),
-        percentile(&latencies, 0.99)
-    );
-    server.stop();
+        percentile(&latencies, 0.99),
+    )
 }
