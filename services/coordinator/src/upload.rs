@@ -446,4 +446,107 @@ mod tests {
             assert!(check_entry_path("d.zip", path).is_err(), "{path}");
         }
     }
+
+    /// The CI-sized counterpart of `fuzz/fuzz_targets/zip_upload.rs` (which
+    /// needs a nightly toolchain): random bytes and corrupted copies of a
+    /// valid zip, each answered with clips or a client error, never a panic or
+    /// a 500, within the memory budget and the limits.
+    mod corrupt_zips {
+        use super::*;
+        use crate::configuration::Limits;
+        use crate::upload_memory::UploadMemory;
+        use proptest::prelude::*;
+        use std::io::Write;
+
+        fn limits() -> Limits {
+            Limits {
+                max_files: 50,
+                max_unzipped_bytes: 8 << 20,
+                upload_memory_bytes: 12 << 20,
+                ..Limits::default()
+            }
+        }
+
+        fn valid_zip() -> Vec<u8> {
+            let bvh = include_bytes!("../../../examples/data/static_root_walk.bvh");
+            let mut out = std::io::Cursor::new(Vec::new());
+            let mut w = zip::ZipWriter::new(&mut out);
+            let opts = zip::write::SimpleFileOptions::default();
+            w.start_file("dir/walk.bvh", opts).expect("zip entry");
+            w.write_all(bvh).expect("zip write");
+            w.start_file("walk2.bvh", opts).expect("zip entry");
+            w.write_all(bvh).expect("zip write");
+            w.finish().expect("zip finish");
+            out.into_inner()
+        }
+
+        fn check(bytes: Vec<u8>) {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .build()
+                .expect("a tokio runtime");
+            let limits = limits();
+            let memory = UploadMemory::new(1, limits.upload_memory_bytes);
+            let mut reservation = runtime.block_on(memory.start());
+            let files = vec![UploadFile {
+                label: "fuzz.zip".into(),
+                name: "fuzz.zip".into(),
+                bytes,
+            }];
+            match parse_upload(files, &limits, &mut reservation) {
+                Ok(clips) => {
+                    assert!(clips.len() <= limits.max_files);
+                    let unpacked: u64 = clips.iter().map(|c| c.source.len() as u64).sum();
+                    assert!(unpacked <= limits.max_unzipped_bytes);
+                }
+                Err(e) => assert!(
+                    e.status().is_client_error() || e.status().as_u16() == 503,
+                    "upload answered {}: {:?}",
+                    e.status(),
+                    e.0.detail
+                ),
+            }
+            assert!(reservation.bytes() <= limits.upload_memory_bytes);
+        }
+
+        #[test]
+        fn the_valid_zip_gives_two_clips() {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .build()
+                .expect("a tokio runtime");
+            let limits = limits();
+            let memory = UploadMemory::new(1, limits.upload_memory_bytes);
+            let mut reservation = runtime.block_on(memory.start());
+            let files = vec![UploadFile {
+                label: "ok.zip".into(),
+                name: "ok.zip".into(),
+                bytes: valid_zip(),
+            }];
+            let clips = parse_upload(files, &limits, &mut reservation).map_err(|e| e.0.detail);
+            assert_eq!(clips.map(|c| c.len()), Ok(2));
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(128))]
+
+            #[test]
+            fn random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..4096)) {
+                check(bytes);
+            }
+
+            #[test]
+            fn corrupted_valid_zips(flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..16),
+                                    cut in any::<prop::sample::Index>()) {
+                let mut bytes = valid_zip();
+                for (at, value) in flips {
+                    let i = at.index(bytes.len());
+                    bytes[i] = value;
+                }
+                if cut.index(4) == 0 {
+                    let n = cut.index(bytes.len());
+                    bytes.truncate(n);
+                }
+                check(bytes);
+            }
+        }
+    }
 }
