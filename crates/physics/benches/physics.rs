@@ -63,11 +63,11 @@ fn main() {
             })
             .collect(),
         // The default configuration first, then the former default (1/120 s,
-        // 4 substeps of one pass) and two substeps for comparison.
+        // 4 substeps of one pass) and one substep of 10 passes for comparison.
         Err(_) => vec![
-            (1.0 / 60.0, 1, None),
+            (1.0 / 60.0, 2, None),
             (1.0 / 120.0, 4, Some(1)),
-            (1.0 / 60.0, 2, Some(5)),
+            (1.0 / 60.0, 1, Some(10)),
         ],
     };
     println!("clip {} ({:.2} s)", clip.display(), motion.duration_s());

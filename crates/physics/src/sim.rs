@@ -25,7 +25,48 @@
 //! models) lets the solver run at coarse steps; it slows the spin of the hands
 //! and feet about their own axes, not the motion of the body as a whole.
 //!
-//! ## Step size, solver iterations, armature: measured
+//! ## Step, substeps and PGS passes (default since issue 12): measured
+//!
+//! The default is a 1/60 s step of 2 substeps (`solver_iterations`) with 5
+//! velocity (PGS) passes each (`pgs_iterations`), one stabilisation pass,
+//! no CCD and no broad-phase tree optimiser. Profile of the former default
+//! (1/120 s, 4 substeps of one pass; `perf record --call-graph dwarf` on
+//! `motionaug bench physics --seconds 3`): rapier's solver 72 % (joint rows:
+//! per-substep rebuild `JointConstraint::update` 29 %, `solve` 21 %,
+//! `finalize_constraints` 11 %), collision detection 10 % (narrow phase 6 %,
+//! broad phase and its tree optimiser 6 %), CCD 2 %, our own code (PD
+//! targets, motors, observation, reward) about 5 %. The motorised spherical
+//! joints take rapier's scalar path (6 rows each, no SIMD). The tracking
+//! error is set by how far the motors of the whole chain converge, not by
+//! the step: more passes per substep buy the same error as more substeps,
+//! without rebuilding every row each substep.
+//!
+//! HDM05 kick, action 0 with the PD residual, `PHYSICS_BENCH_CONFIGS=...
+//! perf stat -e task-clock cargo bench -p physics --bench physics`
+//! (hz:substeps:passes), 3 interleaved rounds in one run under load from
+//! other builds; CPU time per simulated second (task-clock / physics steps)
+//! is the steadier figure:
+//!
+//! | step : substeps : passes | CPU ms per sim s | sim s / wall s (median) | kick error rad | CMU 131 walk (80 steps) |
+//! |---|---|---|---|---|
+//! | 1/120 : 4 : 1 (former) | 6.14 | 89 | 0.080 | 0.097, up |
+//! | **1/60 : 2 : 5** | **3.24** | **164** | **0.077** | **0.096, up** |
+//! | 1/60 : 2 : 6 | 4.04 | 144 | 0.069 | 0.086, up |
+//! | 1/90 : 1 : 7 | 3.37 | 168 | 0.074 | - |
+//! | 1/90 : 1 : 8 | 4.03 | 130 | 0.067 | 0.078, up |
+//! | 1/60 : 1 : 10 | 2.49 | 191 | 0.079 | 0.081, **falls** at step 73 |
+//!
+//! One substep per 1/60 s tracks the kick but drops the walk
+//! (`action_zero_with_pd_residual_keeps_a_walk_up`), whatever the passes
+//! (10, 12, 16 tried); 1/60 s with 2 substeps keeps it up from 4 passes on
+//! (walk error 0.106 at 4, 0.096 at 5). Other HDM05 classes at 1/60 : 2 : 5
+//! against the former default (falls as before: the jog, deposit and sneak
+//! fall with action 0 in both): squat 0.088 vs 0.086 rad, hop 0.078 vs
+//! 0.074, jog 0.077 vs 0.078. Rapier's joint warm start changed nothing
+//! (same error to 4 digits). Turning CCD off saved ~9 % of a step, the tree
+//! optimiser ~4 % (CPU time, 4 rounds; no measurable change in tracking).
+//!
+//! ## Step size, solver iterations, armature: measured (one PGS pass, before issue 12)
 //!
 //! HDM05 `HDM_bd_kickLFront1Reps_001` (1.34 s), action 0 with the PD residual,
 //! control at 30 Hz, `cargo bench -p physics --bench physics` (release, one
@@ -55,8 +96,9 @@
 //! | Motor | 0.1 | 1/120 : 4 | 46.3 | 180 | 0.061 | 0 / 70 |
 //! | Motor, no stabilisation pass | 0.05 | 1/120 : 4 | 56.4 | 148 | 0.095 | 87 / 87 |
 //!
-//! The default is the bold row: the coarsest step that tracks the kick without
-//! a fall at the smallest armature tried. 1/60 s with 8 substeps is a little
+//! The bold row was the default before issue 12: the coarsest step that
+//! tracked the kick without a fall at the smallest armature tried (with one
+//! PGS pass per substep). 1/60 s with 8 substeps is a little
 //! faster at a similar error, but collision detection then runs only every
 //! 17 ms. `Explicit` torques blow up at all of these steps. Most of the time is
 //! rapier's joint solver (`JointConstraint::solve`, `finalize_constraints`:
@@ -97,13 +139,13 @@ impl Default for SimParams {
     fn default() -> Self {
         SimParams {
             dt: 1.0 / 60.0,
-            solver_iterations: 1,
+            solver_iterations: 2,
             friction: 0.9,
             gravity: 9.8,
             pd: PdMode::Motor,
             min_inertia: 0.05,
             stabilization_iterations: 1,
-            pgs_iterations: 10,
+            pgs_iterations: 5,
         }
     }
 }
