@@ -24,11 +24,16 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Measured (release, one thread, `cargo bench -p physics --bench physics`):
-//! on the HDM05 kick, 47-58 simulated seconds per wall second at the default
-//! 1/120 s step with 4 solver substeps while other builds loaded the machine
-//! (127 on a quiet moment), mean joint error 0.075 rad with action 0 and the
-//! PD-residual force, no fall. See [`sim`] for the table of step sizes.
+//! Measured (release, one thread, `motionaug bench physics --seconds 3` on the
+//! bundled HDM05 kick, action 0 with the PD-residual force, 4 interleaved
+//! rounds in one run with the former default while other builds loaded the
+//! machine): 149-238 simulated seconds per wall second at the default 1/60 s
+//! step with 2 substeps of 5 PGS passes, against 60-104 at the former 1/120 s
+//! with 4 substeps of one pass (2.4x per round, median); mean joint error
+//! 0.077 rad (was 0.080), no fall. Against pybullet's DeepMimic humanoid at
+//! 1/1200 s (`benches/physics_vs_pybullet.sh 5`): 45-60x, median 51x (was
+//! 17-33x, median 21x). See [`sim`] for the profile and the table of steps,
+//! substeps and passes.
 
 pub mod bench;
 pub mod character;
