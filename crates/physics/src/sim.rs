@@ -29,7 +29,7 @@
 //!
 //! The default is a 1/60 s step of 2 substeps (`solver_iterations`) with 5
 //! velocity (PGS) passes each (`pgs_iterations`), one stabilisation pass,
-//! no CCD and no broad-phase tree optimiser. Profile of the former default
+//! friction solved in every pass, no CCD and no broad-phase tree optimiser. Profile of the former default
 //! (1/120 s, 4 substeps of one pass; `perf record --call-graph dwarf` on
 //! `motionaug bench physics --seconds 3`): rapier's solver 72 % (joint rows:
 //! per-substep rebuild `JointConstraint::update` 29 %, `solve` 21 %,
@@ -65,6 +65,20 @@
 //! 0.074, jog 0.077 vs 0.078. Rapier's joint warm start changed nothing
 //! (same error to 4 digits). Turning CCD off saved ~9 % of a step, the tree
 //! optimiser ~4 % (CPU time, 4 rounds; no measurable change in tracking).
+//!
+//! Foot skating of the action-0 rollout (`motion::metrics::plausibility` of
+//! the recorded motion, m/s; input in brackets). Rapier solves friction only
+//! in the stabilisation pass by default, one per substep: with fewer
+//! substeps the planted feet slid. Solving it in every pass
+//! (`friction_in_bias_pass`) fixes that at no measurable cost (CPU 66.6 vs
+//! 65.5 us per step, 3 rounds) and brings the kick's error to 0.076 rad:
+//!
+//! | clip | 1/120 : 4 : 1 (former) | 1/60 : 2 : 5, friction in stabilisation only | **1/60 : 2 : 5, friction in every pass** |
+//! |---|---|---|---|
+//! | kick (0.058) | 0.064 | 0.100 | **0.063** |
+//! | jog (0.102), falls at step 38-39 | 0.180 | 0.147 | **0.076** |
+//! | hop (0.148) | 0.043 | 0.197 | **0.044** |
+//! | squat (0.107) | 0.026 | 0.050 | **0.022** |
 //!
 //! ## Step size, solver iterations, armature: measured (one PGS pass, before issue 12)
 //!
@@ -408,6 +422,12 @@ fn world(params: &SimParams) -> PhysicsWorld {
     // tunnel through the 2 m ground box in one step, and rapier's automatic
     // CCD of fast bodies against fixed colliders cost ~15 % of a step.
     world.integration_parameters.max_ccd_substeps = 0;
+    // Friction in every velocity pass, not only in the one stabilisation
+    // (unbiased) pass of each substep, rapier's default: with 2 substeps per
+    // 1/60 s step that left friction unconverged and planted feet sliding
+    // (action-0 foot skating of the HDM05 hop 0.043 -> 0.197 m/s; with this
+    // on 0.044, the jog 0.180 -> 0.076, see the table above).
+    world.integration_parameters.friction_in_bias_pass = true;
     // 17 colliders: the incremental tree optimiser of the broad phase costs
     // more than a less balanced tree (~15 % of a step, measured).
     world.broad_phase = BroadPhaseBvh::with_optimization_strategy(
