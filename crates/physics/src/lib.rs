@@ -26,14 +26,14 @@
 //!
 //! Measured (release, one thread, `motionaug bench physics --seconds 3` on the
 //! bundled HDM05 kick, action 0 with the PD-residual force, 4 interleaved
-//! rounds in one run with the former default while other builds loaded the
-//! machine): 149-238 simulated seconds per wall second at the default 1/60 s
-//! step with 2 substeps of 5 PGS passes, against 60-104 at the former 1/120 s
-//! with 4 substeps of one pass (2.4x per round, median); mean joint error
-//! 0.077 rad (was 0.080), no fall. Against pybullet's DeepMimic humanoid at
-//! 1/1200 s (`benches/physics_vs_pybullet.sh 5`): 45-60x, median 51x (was
-//! 17-33x, median 21x). See [`sim`] for the profile and the table of steps,
-//! substeps and passes.
+//! rounds in one run with the former default and pybullet while other builds
+//! loaded the machine): 208-280 simulated seconds per wall second at the
+//! default 1/60 s step with 2 substeps of 5 PGS passes, against 86-116 at the
+//! former 1/120 s with 4 substeps of one pass (2.35x, per-round median);
+//! mean joint error 0.076 rad (was 0.080), no fall. Against pybullet's
+//! DeepMimic humanoid at 1/1200 s (`benches/physics_vs_pybullet.sh 5`):
+//! 43-58x, median 50x (the former default: 15-23x, median 23x). See [`sim`]
+//! for the profile, the table of steps, substeps and passes, and foot skating.
 
 pub mod bench;
 pub mod character;
