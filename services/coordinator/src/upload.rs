@@ -480,19 +480,27 @@ mod tests {
             out.into_inner()
         }
 
-        fn check(bytes: Vec<u8>) {
+        /// `parse_upload` of one zip under the scaled-down limits, and the
+        /// bytes the upload reserved.
+        fn parse(bytes: Vec<u8>) -> (Result<Vec<ParsedClip>, ApiError>, u64) {
             let runtime = tokio::runtime::Builder::new_current_thread()
                 .build()
                 .expect("a tokio runtime");
-            let limits = limits();
-            let memory = UploadMemory::new(1, limits.upload_memory_bytes);
+            let memory = UploadMemory::new(1, limits().upload_memory_bytes);
             let mut reservation = runtime.block_on(memory.start());
             let files = vec![UploadFile {
                 label: "fuzz.zip".into(),
                 name: "fuzz.zip".into(),
                 bytes,
             }];
-            match parse_upload(files, &limits, &mut reservation) {
+            let out = parse_upload(files, &limits(), &mut reservation);
+            (out, reservation.bytes())
+        }
+
+        fn check(bytes: Vec<u8>) {
+            let limits = limits();
+            let (out, reserved) = parse(bytes);
+            match out {
                 Ok(clips) => {
                     assert!(clips.len() <= limits.max_files);
                     let unpacked: u64 = clips.iter().map(|c| c.source.len() as u64).sum();
@@ -505,24 +513,13 @@ mod tests {
                     e.0.detail
                 ),
             }
-            assert!(reservation.bytes() <= limits.upload_memory_bytes);
+            assert!(reserved <= limits.upload_memory_bytes);
         }
 
         #[test]
         fn the_valid_zip_gives_two_clips() {
-            let runtime = tokio::runtime::Builder::new_current_thread()
-                .build()
-                .expect("a tokio runtime");
-            let limits = limits();
-            let memory = UploadMemory::new(1, limits.upload_memory_bytes);
-            let mut reservation = runtime.block_on(memory.start());
-            let files = vec![UploadFile {
-                label: "ok.zip".into(),
-                name: "ok.zip".into(),
-                bytes: valid_zip(),
-            }];
-            let clips = parse_upload(files, &limits, &mut reservation).map_err(|e| e.0.detail);
-            assert_eq!(clips.map(|c| c.len()), Ok(2));
+            let (out, _) = parse(valid_zip());
+            assert_eq!(out.map(|c| c.len()).map_err(|e| e.0.detail), Ok(2));
         }
 
         proptest! {
