@@ -266,11 +266,7 @@ pub fn run_cmu(
                             &Checkpoint {
                                 iteration: it,
                                 train_seconds: done.train_seconds + started.elapsed().as_secs_f64(),
-                                first_loss: if done.first_loss.is_nan() {
-                                    f64::NAN
-                                } else {
-                                    done.first_loss
-                                },
+                                first_loss: done.first_loss,
                             },
                         )
                     {

@@ -15,7 +15,7 @@
 use std::collections::BTreeMap;
 
 use motion::Motion;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
@@ -30,7 +30,7 @@ use crate::predict::dmgnn::{Dmgnn, DmgnnConfig, Reconstruction};
 use crate::predict::gcn::{Gcn, GcnConfig};
 use crate::predict::occlusion::{MaskKind, Occluder};
 use crate::predict::seq2seq::{Seq2Seq, Seq2SeqConfig};
-use crate::predict::train::{TrainConfig, train_batches};
+use crate::predict::train::{TrainConfig, train};
 use crate::predict::vdmgnn::{Vdmgnn, VdmgnnConfig};
 
 /// Which prediction model to train.
@@ -384,23 +384,13 @@ pub fn evaluate(
     for &seed in &config.seeds {
         let model = build(config, &test.graph, set.dim, seed)?;
         let train_occluder = Occluder::new(config.train_mask.unwrap_or(config.mask), &test.graph)?;
-        if set.windows.is_empty() {
-            return Err(EvalError::Data(
-                "no training windows (every clip is shorter than a window)".into(),
-            ));
-        }
-        let windows = &set.windows;
-        let report = train_batches(
+        let report = train(
             model.as_ref(),
+            &set,
+            &norm,
             &config.train,
             seed,
             Some(&train_occluder),
-            |rng| {
-                let picks: Vec<(usize, usize)> = (0..config.train.batch_size)
-                    .map(|_| windows[rng.random_range(0..windows.len())])
-                    .collect();
-                batch(&set, &norm, &picks)
-            },
             |_, _| {},
         )?;
         let errors = test.score(model.as_ref(), &norm)?;

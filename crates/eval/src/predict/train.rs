@@ -52,13 +52,15 @@ pub struct TrainReport {
     pub seconds: f64,
 }
 
-/// Trains `model` on the windows of `set`; `progress(iteration, loss)` after each step.
+/// Trains `model` on the windows of `set` (their observed frames masked by
+/// `occluder`); `progress(iteration, loss)` after each step.
 pub fn train(
     model: &dyn Predictor,
     set: &ClipSet,
     norm: &Normalizer,
     config: &TrainConfig,
     seed: u64,
+    occluder: Option<&Occluder>,
     progress: impl FnMut(usize, f64),
 ) -> Result<TrainReport> {
     if set.windows.is_empty() {
@@ -71,7 +73,7 @@ pub fn train(
         model,
         config,
         seed,
-        None,
+        occluder,
         |rng| {
             let picks: Vec<(usize, usize)> = (0..config.batch_size)
                 .map(|_| windows[rng.random_range(0..windows.len())])

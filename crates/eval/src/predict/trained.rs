@@ -24,10 +24,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::{EvalError, Result};
 use crate::predict::Predictor;
 use crate::predict::body_graph::BodyGraph;
-use crate::predict::data::{ClipSet, INPUT_FRAMES, Normalizer, OUTPUT_FRAMES, batch, features};
+use crate::predict::data::{ClipSet, INPUT_FRAMES, Normalizer, OUTPUT_FRAMES, features};
 use crate::predict::occlusion::{MaskKind, Occluder};
 use crate::predict::protocol::{GraphOptions, ModelKind, ModelSizes, ProtocolConfig, build};
-use crate::predict::train::{TrainConfig, TrainReport, train_batches};
+use crate::predict::train::{self, TrainConfig, TrainReport};
 
 pub const MODEL_FILE: &str = "model.json";
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
@@ -129,20 +129,13 @@ impl TrainedPredictor {
         };
         let m = build(&to_config(&file), &file.graph, set.dim, seed)?;
         let occluder = Occluder::new(mask, &file.graph)?;
-        let windows = &set.windows;
-        let norm = &file.normalizer;
-        let report: TrainReport = train_batches(
+        let report: TrainReport = train::train(
             m.as_ref(),
+            &set,
+            &file.normalizer,
             &train,
             seed,
             Some(&occluder),
-            |rng| {
-                use rand::Rng;
-                let picks: Vec<(usize, usize)> = (0..train.batch_size)
-                    .map(|_| windows[rng.random_range(0..windows.len())])
-                    .collect();
-                batch(&set, norm, &picks)
-            },
             progress,
         )?;
         file.first_loss = report.first_loss;
