@@ -11,10 +11,11 @@
 //! * `foot_skating`: the output's foot skating (`motion::metrics`) <=
 //!   `max_foot_skating_m_s` and (`skating_at_most_input`) <= the input's.
 //! * `soles_flat`: in the frames where a simulated foot is planted (touching
-//!   the ground and moving slower than `planted_speed_m_s`), its heel and toe
-//!   are both within `sole_tolerance_m` of the floor in at least
-//!   `min_flat_fraction` of them (feet on their soles, not on the heel edge
-//!   with the toes up).
+//!   the ground with its heel and its toe both slower than
+//!   `planted_speed_m_s`: standing, not rolling onto or off its toes), its
+//!   heel and toe are both within `sole_tolerance_m` of the floor in at
+//!   least `min_flat_fraction` of them (feet on their soles, not on the heel
+//!   edge with the toes up).
 //!
 //! The limits are settings so that a study can ask for more; the defaults are
 //! the product's meaning of "accepted" and tests of the pipeline's plumbing
@@ -43,8 +44,9 @@ pub struct AcceptanceConfig {
     pub sole_tolerance_m: f64,
     /// Fraction of planted foot frames that must stand on the sole.
     pub min_flat_fraction: f64,
-    /// A foot touching the ground slower than this (sole midpoint, horizontal)
-    /// is planted, m/s.
+    /// A foot touching the ground with its heel and its toe both slower than
+    /// this (3D) is planted, m/s. A foot rolling over its heel or onto its
+    /// toes moves one end faster and is not standing on anything yet.
     pub planted_speed_m_s: f64,
 }
 
@@ -176,6 +178,23 @@ impl SoleStats {
             self.flat_frames as f64 / self.planted_frames as f64
         }
     }
+}
+
+/// The soles criterion applied to the *input*: the reference's heel and toe
+/// (with the character's own sole points, built from `physics`) in every
+/// frame after the first, a reference foot touching when the lower of its
+/// heel and toe is within `sole_tolerance_m` of the floor. What the captured
+/// motion itself would score, so that a limit the capture cannot meet shows.
+pub fn input_soles(
+    motion: &motion::Motion,
+    physics: &physics::Config,
+    config: &AcceptanceConfig,
+) -> Result<SoleStats, CorrectError> {
+    let env = physics::ImitationEnv::new(motion, physics)?;
+    Ok(SoleStats::of(
+        &env.reference_foot_contacts(config.sole_tolerance_m as f32),
+        config,
+    ))
 }
 
 /// Every criterion, judged on a rollout and the plausibility of the input and

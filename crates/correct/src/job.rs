@@ -18,7 +18,7 @@ use physics::{ImitationEnv, Residual};
 use ppo::{Control, PpoConfig, RunLimits, StopReason, Trainer};
 
 use crate::CorrectError;
-use crate::acceptance::{AcceptanceConfig, Criterion, SoleStats, all_passed, judge};
+use crate::acceptance::{AcceptanceConfig, Criterion, all_passed, judge};
 use crate::report::{Report, curve_svg};
 use crate::rollout::{Rollout, deterministic_rollout};
 use crate::task::ImitationTask;
@@ -243,12 +243,8 @@ pub fn correct(
 
     let mut eval_env = ImitationEnv::new(motion, &config.physics)?;
     let before = motion::metrics::plausibility(motion);
-    let acceptance = &config.acceptance;
-    let soles_before = SoleStats::of(
-        &eval_env.reference_foot_contacts(acceptance.sole_tolerance_m as f32),
-        acceptance,
-    )
-    .flat_fraction();
+    let soles_before = crate::acceptance::input_soles(motion, &config.physics, &config.acceptance)?
+        .flat_fraction();
     let action0 = deterministic_rollout(&mut eval_env, |_, a| {
         a.fill(0.0);
         Ok(())

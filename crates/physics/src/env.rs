@@ -188,7 +188,9 @@ pub struct FootContact {
     pub heel_m: f32,
     /// Height of the sole's toe above the floor, m.
     pub toe_m: f32,
-    /// Horizontal speed of the sole's midpoint, m/s.
+    /// Speed of the faster of the sole's heel and toe, m/s (3D): a foot
+    /// rolling onto or off its toes moves one end fast while the other
+    /// stays, a foot standing still moves neither.
     pub speed_m_s: f32,
     /// The foot's collider touches the ground.
     pub touching: bool,
@@ -252,6 +254,14 @@ fn sole_speed(s: &BodyState, [heel, toe]: [Vec3; 2]) -> f32 {
     let mid = 0.5 * (heel + toe);
     let v = s.vel + s.angvel.cross(mid - s.pos);
     Vec3::new(v.x, 0.0, v.z).length()
+}
+
+/// Speed of the faster of the two sole points (heel, toe), m/s, in 3D.
+fn sole_point_speed(s: &BodyState, points: [Vec3; 2]) -> f32 {
+    points
+        .map(|p| (s.vel + s.angvel.cross(p - s.pos)).length())
+        .into_iter()
+        .fold(0.0, f32::max)
 }
 
 fn exp_map(v: Vec3) -> Quat {
@@ -915,7 +925,7 @@ impl ImitationEnv {
                         FootContact {
                             heel_m: heel.y,
                             toe_m: toe.y,
-                            speed_m_s: sole_speed(s, [heel, toe]),
+                            speed_m_s: sole_point_speed(s, [heel, toe]),
                             touching: heel.y.min(toe.y) <= touch_m,
                         }
                     })
@@ -934,10 +944,44 @@ impl ImitationEnv {
                 FootContact {
                     heel_m: heel.y,
                     toe_m: toe.y,
-                    speed_m_s: sole_speed(&self.sim.state[b], [heel, toe]),
+                    speed_m_s: sole_point_speed(&self.sim.state[b], [heel, toe]),
                     touching: self.sim.touches_ground(b),
                 }
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A foot pitching about its planted toe (heel-off) moves its heel and is
+    /// not standing still; a foot at rest, whatever its angle, moves neither
+    /// end.
+    #[test]
+    fn a_rolling_foot_moves_one_end_and_a_resting_foot_none() {
+        let toe = Vec3::new(0.2, 0.0, 0.0);
+        let heel = Vec3::new(0.0, 0.03, 0.0);
+        let pos = Vec3::new(0.1, 0.05, 0.0);
+        // Rotating at 2 rad/s about the z axis through the toe.
+        let w = Vec3::new(0.0, 0.0, 2.0);
+        let rolling = BodyState {
+            pos,
+            rot: Quat::IDENTITY,
+            vel: w.cross(pos - toe),
+            angvel: w,
+        };
+        let v = sole_point_speed(&rolling, [heel, toe]);
+        assert!((v - 2.0 * (heel - toe).length()).abs() < 1e-5, "{v}");
+        // The old measure (midpoint, horizontal) barely sees the roll.
+        assert!(sole_speed(&rolling, [heel, toe]) < 0.5 * v);
+        let resting = BodyState {
+            pos,
+            rot: Quat::from_rotation_z(0.4),
+            vel: Vec3::ZERO,
+            angvel: Vec3::ZERO,
+        };
+        assert_eq!(sole_point_speed(&resting, [heel, toe]), 0.0);
     }
 }

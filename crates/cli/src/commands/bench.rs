@@ -5,6 +5,10 @@
 //! corrects N clips of each class (spread over the class) and writes the
 //! per-class table of acceptance, plausibility and wall time
 //! (`correct::summary`); finished clips are reused on a rerun.
+//!
+//! `motionaug bench soles --data DIR [--classes a,b]`: the soles criterion of
+//! acceptance applied to the captured clips themselves, per class: what the
+//! input would score, so that a limit the capture cannot meet shows.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -40,6 +44,18 @@ enum What {
     },
     /// Correct clips of each class and tabulate acceptance, plausibility and wall time.
     Correction(CorrectionArgs),
+    /// The soles criterion (planted feet on their soles) scored on the
+    /// captured clips themselves, per class.
+    Soles {
+        /// Folder of HDM05 clips (`HDM_<actor>_<class>_<nnn>_120.amc` + `HDM_<actor>.asf`).
+        #[arg(long)]
+        data: PathBuf,
+        /// Classes (parts of class names); every class in the folder when absent.
+        #[arg(long, value_delimiter = ',')]
+        classes: Vec<String>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Training cost of a prediction model (DMGNN, V-DMGNN-GAN): seconds per
     /// iteration and windows per second of the real training loop.
     Predictor(PredictorArgs),
@@ -340,10 +356,81 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// One class's inputs under the soles criterion.
+#[derive(serde::Serialize)]
+struct SolesRow {
+    class: String,
+    clips: usize,
+    /// Clips whose input meets the criterion's limit.
+    passing: usize,
+    mean_flat_fraction: f64,
+    min_flat_fraction: f64,
+    planted_frames: usize,
+}
+
+fn bench_soles(data: &Path, classes: &[String], json: bool) -> anyhow::Result<()> {
+    let config = correct::CorrectConfig::default();
+    let limit = config.acceptance.min_flat_fraction;
+    let mut names: Vec<String> = if classes.is_empty() {
+        let all = eval::dataset::find_clips(data, "")?;
+        all.iter().map(|c| c.class.clone()).collect()
+    } else {
+        classes.to_vec()
+    };
+    names.sort();
+    names.dedup();
+    let mut rows = Vec::new();
+    for class in &names {
+        let mut fractions = Vec::new();
+        let mut planted = 0;
+        for clip in eval::dataset::find_clips(data, class)? {
+            let motion = load_hdm05(&clip.path, &data.join(format!("HDM_{}.asf", clip.actor)))?;
+            let s = correct::acceptance::input_soles(&motion, &config.physics, &config.acceptance)
+                .with_context(|| clip.name.clone())?;
+            planted += s.planted_frames;
+            fractions.push(s.flat_fraction());
+        }
+        rows.push(SolesRow {
+            class: class.clone(),
+            clips: fractions.len(),
+            passing: fractions.iter().filter(|&&f| f >= limit).count(),
+            mean_flat_fraction: fractions.iter().sum::<f64>() / fractions.len() as f64,
+            min_flat_fraction: fractions.iter().copied().fold(f64::INFINITY, f64::min),
+            planted_frames: planted,
+        });
+    }
+    let text = if json {
+        serde_json::to_string_pretty(&rows)? + "\n"
+    } else {
+        let mut t = format!(
+            "| class | clips | inputs flat in >= {:.0} % of planted frames | mean flat | min flat | planted foot frames |\n|---|---|---|---|---|---|\n",
+            limit * 100.0
+        );
+        for r in &rows {
+            t += &format!(
+                "| {} | {} | {} | {:.2} | {:.2} | {} |\n",
+                r.class,
+                r.clips,
+                r.passing,
+                r.mean_flat_fraction,
+                r.min_flat_fraction,
+                r.planted_frames
+            );
+        }
+        t
+    };
+    print_stdout(&text)
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Correction(a) => bench_correction(a),
         What::Predictor(a) => bench_predictor(a),
+        What::Soles {
+            data,
+            classes,
+            json,
+        } => bench_soles(&data, &classes, json),
         What::Physics {
             clip,
             input,
