@@ -23,7 +23,10 @@ pub struct BenchReport {
     pub us_per_physics_step: f64,
     pub dt: f64,
     pub control_hz: f64,
+    /// Rapier substeps per physics step.
     pub solver_iterations: usize,
+    /// Velocity (PGS) passes per substep.
+    pub pgs_iterations: usize,
     pub bodies: usize,
     /// Passes over the clip (the clip is repeated to time at least `min_wall_s`).
     pub passes: usize,
@@ -96,6 +99,7 @@ pub fn bench_physics_for(
         dt: cfg.sim.dt as f64,
         control_hz: cfg.control_hz,
         solver_iterations: cfg.sim.solver_iterations,
+        pgs_iterations: cfg.sim.pgs_iterations,
         bodies: env.spec().bodies.len(),
         passes,
         falls,

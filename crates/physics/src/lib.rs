@@ -24,11 +24,16 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Measured (release, one thread, `cargo bench -p physics --bench physics`):
-//! on the HDM05 kick, 47-58 simulated seconds per wall second at the default
-//! 1/120 s step with 4 solver substeps while other builds loaded the machine
-//! (127 on a quiet moment), mean joint error 0.075 rad with action 0 and the
-//! PD-residual force, no fall. See [`sim`] for the table of step sizes.
+//! Measured (release, one thread, `motionaug bench physics --seconds 3` on the
+//! bundled HDM05 kick, action 0 with the PD-residual force, 4 interleaved
+//! rounds in one run with the former default and pybullet while other builds
+//! loaded the machine): 208-280 simulated seconds per wall second at the
+//! default 1/60 s step with 2 substeps of 5 PGS passes, against 86-116 at the
+//! former 1/120 s with 4 substeps of one pass (2.35x, per-round median);
+//! mean joint error 0.076 rad (was 0.080), no fall. Against pybullet's
+//! DeepMimic humanoid at 1/1200 s (`benches/physics_vs_pybullet.sh 5`):
+//! 43-58x, median 50x (the former default: 15-23x, median 23x). See [`sim`]
+//! for the profile, the table of steps, substeps and passes, and foot skating.
 
 pub mod bench;
 pub mod character;

@@ -25,7 +25,63 @@
 //! models) lets the solver run at coarse steps; it slows the spin of the hands
 //! and feet about their own axes, not the motion of the body as a whole.
 //!
-//! ## Step size, solver iterations, armature: measured
+//! ## Step, substeps and PGS passes (default since issue 12): measured
+//!
+//! The default is a 1/60 s step of 2 substeps (`solver_iterations`) with 5
+//! velocity (PGS) passes each (`pgs_iterations`), one stabilisation pass,
+//! friction solved in every pass, no CCD and no broad-phase tree optimiser. Profile of the former default
+//! (1/120 s, 4 substeps of one pass; `perf record --call-graph dwarf` on
+//! `motionaug bench physics --seconds 3`): rapier's solver 72 % (joint rows:
+//! per-substep rebuild `JointConstraint::update` 29 %, `solve` 21 %,
+//! `finalize_constraints` 11 %), collision detection 10 % (narrow phase 6 %,
+//! broad phase and its tree optimiser 6 %), CCD 2 %, our own code (PD
+//! targets, motors, observation, reward) about 5 %. The motorised spherical
+//! joints take rapier's scalar path (6 rows each, no SIMD). The tracking
+//! error is set by how far the motors of the whole chain converge, not by
+//! the step: more passes per substep buy the same error as more substeps,
+//! without rebuilding every row each substep.
+//!
+//! HDM05 kick, action 0 with the PD residual, `PHYSICS_BENCH_CONFIGS=...
+//! perf stat -e task-clock cargo bench -p physics --bench physics`
+//! (hz:substeps:passes), 3 interleaved rounds in one run under load from
+//! other builds; CPU time per simulated second (task-clock / physics steps)
+//! is the steadier figure:
+//!
+//! | step : substeps : passes | CPU ms per sim s | sim s / wall s (median) | kick error rad | CMU 131 walk (80 steps) |
+//! |---|---|---|---|---|
+//! | 1/120 : 4 : 1 (former) | 6.14 | 89 | 0.080 | 0.097, up |
+//! | **1/60 : 2 : 5** | **3.24** | **164** | **0.077** | **0.096, up** |
+//! | 1/60 : 2 : 6 | 4.04 | 144 | 0.069 | 0.086, up |
+//! | 1/90 : 1 : 7 | 3.37 | 168 | 0.074 | - |
+//! | 1/90 : 1 : 8 | 4.03 | 130 | 0.067 | 0.078, up |
+//! | 1/60 : 1 : 10 | 2.49 | 191 | 0.079 | 0.081, **falls** at step 73 |
+//!
+//! (Measured before friction moved into every pass, below; with it the
+//! default row's kick error is 0.076 rad.) One substep per 1/60 s tracks the kick but drops the walk
+//! (`action_zero_with_pd_residual_keeps_a_walk_up`), whatever the passes
+//! (10, 12, 16 tried); 1/60 s with 2 substeps keeps it up from 4 passes on
+//! (walk error 0.106 at 4, 0.096 at 5). Other HDM05 classes at 1/60 : 2 : 5
+//! against the former default (falls as before: the jog, deposit and sneak
+//! fall with action 0 in both): squat 0.088 vs 0.086 rad, hop 0.078 vs
+//! 0.074, jog 0.077 vs 0.078. Rapier's joint warm start changed nothing
+//! (same error to 4 digits). Turning CCD off saved ~9 % of a step, the tree
+//! optimiser ~4 % (CPU time, 4 rounds; no measurable change in tracking).
+//!
+//! Foot skating of the action-0 rollout (`motion::metrics::plausibility` of
+//! the recorded motion, m/s; input in brackets). Rapier solves friction only
+//! in the stabilisation pass by default, one per substep: with fewer
+//! substeps the planted feet slid. Solving it in every pass
+//! (`friction_in_bias_pass`) fixes that at no measurable cost (CPU 66.6 vs
+//! 65.5 us per step, 3 rounds) and brings the kick's error to 0.076 rad:
+//!
+//! | clip | 1/120 : 4 : 1 (former) | 1/60 : 2 : 5, friction in stabilisation only | **1/60 : 2 : 5, friction in every pass** |
+//! |---|---|---|---|
+//! | kick (0.058) | 0.064 | 0.100 | **0.063** |
+//! | jog (0.102), falls at step 38-39 | 0.180 | 0.147 | **0.076** |
+//! | hop (0.148) | 0.043 | 0.197 | **0.044** |
+//! | squat (0.107) | 0.026 | 0.050 | **0.022** |
+//!
+//! ## Step size, solver iterations, armature: measured (one PGS pass, before issue 12)
 //!
 //! HDM05 `HDM_bd_kickLFront1Reps_001` (1.34 s), action 0 with the PD residual,
 //! control at 30 Hz, `cargo bench -p physics --bench physics` (release, one
@@ -55,8 +111,9 @@
 //! | Motor | 0.1 | 1/120 : 4 | 46.3 | 180 | 0.061 | 0 / 70 |
 //! | Motor, no stabilisation pass | 0.05 | 1/120 : 4 | 56.4 | 148 | 0.095 | 87 / 87 |
 //!
-//! The default is the bold row: the coarsest step that tracks the kick without
-//! a fall at the smallest armature tried. 1/60 s with 8 substeps is a little
+//! The bold row was the default before issue 12: the coarsest step that
+//! tracked the kick without a fall at the smallest armature tried (with one
+//! PGS pass per substep). 1/60 s with 8 substeps is a little
 //! faster at a similar error, but collision detection then runs only every
 //! 17 ms. `Explicit` torques blow up at all of these steps. Most of the time is
 //! rapier's joint solver (`JointConstraint::solve`, `finalize_constraints`:
@@ -64,7 +121,12 @@
 //!
 //! Our code in [`Sim::substep`] and the environment's step allocates nothing;
 //! rapier 0.36 itself makes about 11 small heap allocations per physics step
-//! (counted with a counting global allocator on the sway fixture).
+//! (counted with a counting global allocator on the sway fixture). In `Motor`
+//! mode [`Sim::substep`] borrows only the root body mutably (a mutably
+//! borrowed body goes through rapier's user-change pass). Setting the motor
+//! targets needs `ImpulseJointSet::get_mut`, which makes rapier rebuild its
+//! joint assembly (colouring, builders, island links) at every step: about
+//! 3-5 % of a step, with no public way around it in rapier 0.36.
 
 use glam::{Mat3, Quat, Vec3};
 use rapier3d::prelude::*;
@@ -85,18 +147,25 @@ pub struct SimParams {
     pub min_inertia: f32,
     /// Rapier's stabilisation (position-correction) passes per substep.
     pub stabilization_iterations: usize,
+    /// Rapier's velocity (PGS) passes per substep
+    /// (`num_internal_pgs_iterations`): the joint motors of the whole chain
+    /// converge with passes, so several passes in one substep track as well
+    /// as several substeps of one pass, at a fraction of the cost (each
+    /// substep also rebuilds every joint row).
+    pub pgs_iterations: usize,
 }
 
 impl Default for SimParams {
     fn default() -> Self {
         SimParams {
-            dt: 1.0 / 120.0,
-            solver_iterations: 4,
+            dt: 1.0 / 60.0,
+            solver_iterations: 2,
             friction: 0.9,
             gravity: 9.8,
             pd: PdMode::Motor,
             min_inertia: 0.05,
             stabilization_iterations: 1,
+            pgs_iterations: 5,
         }
     }
 }
@@ -265,7 +334,15 @@ impl Sim {
         root_torque: Vec3,
     ) {
         let dt = self.params.dt;
-        for h in &self.bodies {
+        // Only the root carries a force in `Motor` mode: borrowing a body
+        // mutably queues it for rapier's user-change pass, so the others are
+        // left alone.
+        let touched = if self.params.pd == PdMode::Motor {
+            &self.bodies[..1]
+        } else {
+            &self.bodies[..]
+        };
+        for h in touched {
             let rb = &mut self.world.bodies[*h];
             rb.reset_forces(false);
             rb.reset_torques(false);
@@ -279,14 +356,14 @@ impl Sim {
             let sp = self.state[p];
             let sb = self.state[b];
             let rel = sp.rot.inverse() * sb.rot;
-            let e = sp.rot * quat_log(targets[b] * rel.inverse());
+            let e_local = quat_log(targets[b] * rel.inverse());
+            let e = sp.rot * e_local;
             let w = sb.angvel - sp.angvel;
             let w_ref = sp.rot * target_vel[b];
             let mut tau = match self.params.pd {
                 PdMode::Motor => {
                     // Parent-frame velocity target for the three angular motor axes.
-                    let v =
-                        target_vel[b] + (kp / kd.max(1e-6)) * quat_log(targets[b] * rel.inverse());
+                    let v = target_vel[b] + (kp / kd.max(1e-6)) * e_local;
                     if let Some(h) = self.joints[b]
                         && let Some(j) = self.world.impulse_joints.get_mut(h, false)
                     {
@@ -341,6 +418,22 @@ fn world(params: &SimParams) -> PhysicsWorld {
     world
         .integration_parameters
         .num_internal_stabilization_iterations = params.stabilization_iterations;
+    world.integration_parameters.num_internal_pgs_iterations = params.pgs_iterations.max(1);
+    // No continuous collision detection: no body is fast or thin enough to
+    // tunnel through the 2 m ground box in one step, and rapier's automatic
+    // CCD of fast bodies against fixed colliders cost ~15 % of a step.
+    world.integration_parameters.max_ccd_substeps = 0;
+    // Friction in every velocity pass, not only in the one stabilisation
+    // (unbiased) pass of each substep, rapier's default: with 2 substeps per
+    // 1/60 s step that left friction unconverged and planted feet sliding
+    // (action-0 foot skating of the HDM05 hop 0.043 -> 0.197 m/s; with this
+    // on 0.044, the jog 0.180 -> 0.076, see the table above).
+    world.integration_parameters.friction_in_bias_pass = true;
+    // 17 colliders: the incremental tree optimiser of the broad phase costs
+    // more than a less balanced tree (~15 % of a step, measured).
+    world.broad_phase = BroadPhaseBvh::with_optimization_strategy(
+        rapier3d::geometry::BvhOptimizationStrategy::None,
+    );
     world
 }
 

@@ -446,11 +446,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 serde_json::to_string_pretty(&report)? + "\n"
             } else {
                 format!(
-                    "{:.1} simulated s per wall s (dt {:.5} s, {} solver iterations, {} bodies), \
-                     mean joint error {:.4} rad, {} falls\n",
+                    "{:.1} simulated s per wall s (dt {:.5} s, {} substeps x {} PGS passes, \
+                     {} bodies), mean joint error {:.4} rad, {} falls\n",
                     report.sim_seconds_per_wall_second,
                     report.dt,
                     report.solver_iterations,
+                    report.pgs_iterations,
                     report.bodies,
                     report.mean_joint_error_rad,
                     report.falls
