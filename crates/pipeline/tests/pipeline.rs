@@ -534,7 +534,23 @@ fn a_class_tracker_runs_in_process_and_its_corrections_start_from_it() {
         on_event: &quiet,
     };
     let summary = run(&recipe, &clips, &options).expect("run");
-    assert!(summary.failures.is_empty(), "{:?}", summary.failures);
+    // A one-second tracker is barely trained: a clip it corrects may fall
+    // (rejected, so its debiasing is skipped). That is the plumbing working;
+    // no job may fail for any other reason.
+    for (key, reason) in &summary.failures {
+        let clip = reason
+            .strip_prefix("skipped: correct:")
+            .and_then(|r| r.strip_suffix(" failed"))
+            .unwrap_or_else(|| panic!("{key}: {reason}"));
+        assert!(key.starts_with("debias_apply:"), "{key}: {reason}");
+        assert!(
+            summary.rejected.iter().any(|c| c == clip),
+            "{key}: {reason}"
+        );
+        let r = correct::Report::read(&work.join("correct").join(clip).join("report.json"))
+            .expect("the rejected correction's report");
+        assert!(!r.accepted && !r.rejected_because.is_empty(), "{r:?}");
+    }
     let tracker = work.join("trackers/kickLFront1Reps");
     let report =
         correct::ClassReport::read(&tracker.join(correct::class::REPORT_FILE)).expect("class.json");
