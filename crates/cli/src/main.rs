@@ -52,6 +52,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    nn::threads::init();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_env_filter(

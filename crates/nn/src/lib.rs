@@ -11,6 +11,8 @@
 //!   and restored bit for bit, and the one gradient-norm clipping function.
 //! * [`kl`]: the diagonal Gaussian latent: KL to N(0, I), reparameterisation,
 //!   seeded standard normal noise.
+//! * [`threads`]: candle's kernels on one thread (its spinning worker pool
+//!   costs more than it gives our small networks), set once in `main`.
 //!
 //! Everything is f32 on the CPU.
 
@@ -21,6 +23,7 @@ pub mod linear;
 pub mod mlp;
 pub mod optim;
 pub mod params;
+pub mod threads;
 
 pub use error::{NnError, Result};
 pub use kl::{kl_mean, kl_sum, normal, reparameterise};

@@ -5,8 +5,8 @@
 //!   split into rollout (inference) and update samples per second.
 //!
 //! For the two net sizes [1024, 512] (reference) and [256, 256].
-//! Run: `cargo bench -p ppo --bench throughput` (set RAYON_NUM_THREADS=1 to stop candle's
-//! matmuls from splitting across cores).
+//! Run: `cargo bench -p ppo --bench throughput`. Like the binaries it keeps candle's
+//! kernels on one thread (`nn::threads::init`); set CANDLE_NUM_THREADS=2 to compare.
 
 use std::time::Instant;
 
@@ -76,6 +76,7 @@ fn forward_per_sample(policy: &GaussianPolicy, value: &ValueNet, batch: usize, r
 }
 
 fn main() {
+    nn::threads::init();
     println!(
         "candle matmul threads (RAYON_NUM_THREADS or physical cores): {}",
         candle_core::utils::get_num_threads()

@@ -24,6 +24,7 @@ use clap::Parser;
 struct Cli {}
 
 fn main() -> anyhow::Result<()> {
+    nn::threads::init();
     Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
