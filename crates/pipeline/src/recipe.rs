@@ -22,6 +22,7 @@
 //!
 //! [correct]                 # every new clip through physical correction
 //! time_budget_s = 300
+//! max_iterations = 15       # PPO iterations per clip at most (optional)
 //! residual = "pd"           # pd | none | learned
 //! keep_rejected = false     # keep clips that fail acceptance (marked in the manifest)
 //! accept_threshold = 0.7    # acceptance (correct::acceptance): mean reward at least,
@@ -31,6 +32,7 @@
 //! min_sole_flat_fraction = 0.9    # planted frames on the sole at least
 //! policy = "clip"           # clip (one policy per clip) | class (one tracker per class first)
 //! tracker_budget_s = 1800   # with policy = "class": each class tracker's budget
+//! tracker_iterations = 150  #   and its PPO iterations at most (optional)
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
@@ -130,6 +132,10 @@ impl InteractionStep {
 pub struct CorrectStep {
     /// Training budget per clip, seconds.
     pub time_budget_s: f64,
+    /// PPO iterations per clip at most (a budget that does not depend on the
+    /// machine; the time budget still applies). With `policy = "class"`, 0
+    /// judges the tracker as is.
+    pub max_iterations: Option<u64>,
     pub residual: ResidualKind,
     /// Stop a clip's training once its rollout reaches this R_norm (and is accepted).
     pub target_r_norm: f64,
@@ -158,6 +164,8 @@ pub struct CorrectStep {
     pub policy: PolicyKind,
     /// Training budget of each class tracker, seconds (`policy = "class"`).
     pub tracker_budget_s: f64,
+    /// PPO iterations of each class tracker at most (`policy = "class"`).
+    pub tracker_iterations: Option<u64>,
     /// Upcoming reference frames a class tracker sees.
     pub tracker_frames: usize,
 }
@@ -194,6 +202,7 @@ impl Default for CorrectStep {
         let c = correct::CorrectConfig::default();
         CorrectStep {
             time_budget_s: c.time_budget_s,
+            max_iterations: None,
             residual: ResidualKind::Pd,
             target_r_norm: c.target_r_norm.unwrap_or(0.8),
             accept_threshold: c.acceptance.min_mean_reward,
@@ -206,6 +215,7 @@ impl Default for CorrectStep {
             envs: c.envs,
             policy: PolicyKind::Clip,
             tracker_budget_s: 1800.0,
+            tracker_iterations: None,
             tracker_frames: correct::ClassConfig::default()
                 .correct
                 .physics
@@ -219,6 +229,7 @@ impl CorrectStep {
     pub fn config(&self, seed: u64) -> correct::CorrectConfig {
         let mut c = correct::CorrectConfig {
             time_budget_s: self.time_budget_s,
+            max_iterations: self.max_iterations,
             target_r_norm: Some(self.target_r_norm),
             acceptance: correct::AcceptanceConfig {
                 min_mean_reward: self.accept_threshold,
@@ -244,6 +255,7 @@ impl CorrectStep {
             ..correct::ClassConfig::default()
         };
         c.correct.time_budget_s = self.tracker_budget_s;
+        c.correct.max_iterations = self.tracker_iterations;
         c.correct.physics.tracker_frames = self.tracker_frames;
         c
     }
@@ -348,6 +360,18 @@ pub mod bounds {
         7.0 * 86_400.0,
         "seconds per class tracker (a week)",
     );
+    pub const CORRECT_MAX_ITERATIONS: Bound = bound(
+        "correct",
+        "max_iterations",
+        1_000_000.0,
+        "PPO iterations per clip",
+    );
+    pub const CORRECT_TRACKER_ITERATIONS: Bound = bound(
+        "correct",
+        "tracker_iterations",
+        1_000_000.0,
+        "PPO iterations per class tracker",
+    );
     pub const DEBIAS_ITERATIONS: Bound =
         bound("debias", "iterations", 200_000.0, "optimiser steps");
     pub const DEBIAS_BATCH_SIZE: Bound = bound("debias", "batch_size", 65_536.0, "frames");
@@ -372,6 +396,8 @@ pub mod bounds {
         CORRECT_TIME_BUDGET_S,
         CORRECT_ENVS,
         CORRECT_TRACKER_BUDGET_S,
+        CORRECT_MAX_ITERATIONS,
+        CORRECT_TRACKER_ITERATIONS,
         DEBIAS_ITERATIONS,
         DEBIAS_BATCH_SIZE,
         DEBIAS_LAYERS,
@@ -537,6 +563,9 @@ impl Recipe {
             }
             bounds::CORRECT_TIME_BUDGET_S.check(c.time_budget_s)?;
             bounds::CORRECT_ENVS.check(c.envs as f64)?;
+            if let Some(n) = c.max_iterations {
+                bounds::CORRECT_MAX_ITERATIONS.check(n as f64)?;
+            }
             for (name, v) in [
                 ("target_r_norm", c.target_r_norm),
                 ("accept_threshold", c.accept_threshold),
@@ -557,6 +586,9 @@ impl Recipe {
                     ));
                 }
                 bounds::CORRECT_TRACKER_BUDGET_S.check(c.tracker_budget_s)?;
+                if let Some(n) = c.tracker_iterations {
+                    bounds::CORRECT_TRACKER_ITERATIONS.check(n as f64)?;
+                }
                 if !(1..=8).contains(&c.tracker_frames) {
                     return Err(err("[correct]", "`tracker_frames` must be in 1..=8"));
                 }

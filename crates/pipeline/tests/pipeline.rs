@@ -586,6 +586,16 @@ fn numeric_recipe_fields_have_upper_bounds() {
         ("[correct]", "envs", "[correct]\nenvs = 1000000\n"),
         (
             "[correct]",
+            "max_iterations",
+            "[correct]\nmax_iterations = 1000001\n",
+        ),
+        (
+            "[correct]",
+            "tracker_iterations",
+            "[correct]\npolicy = \"class\"\ntracker_iterations = 1000001\n",
+        ),
+        (
+            "[correct]",
             "tracker_budget_s",
             "[correct]\npolicy = \"class\"\ntracker_budget_s = 1e12\n",
         ),
@@ -649,11 +659,11 @@ fn numeric_recipe_fields_have_upper_bounds() {
     // The bounds themselves are accepted.
     let at_bounds = format!(
         "{base}[vae]\niterations = 100000\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
-         policy = \"class\"\ntracker_budget_s = 604800\n\
+         policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\ntracker_iterations = 1000000\n\
          [debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 14);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 16);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.
