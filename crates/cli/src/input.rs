@@ -7,7 +7,9 @@ use motion::{Motion, Unit};
 /// How to read input clips.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ClipArgs {
-    /// ASF skeleton for AMC clips (HDM05, CMU): `HDM_bd.asf` for `HDM_bd_*.amc`.
+    /// ASF skeleton for AMC clips (HDM05, CMU); default: the one beside each
+    /// clip (`HDM_bd.asf` for `HDM_bd_*.amc`, `07.asf` for `07_01.amc`, or the
+    /// folder's only .asf).
     #[arg(long, value_name = "ASF")]
     pub skeleton: Option<PathBuf>,
     /// Length unit of BVH files: m, cm, mm, in, ft, cmu, or auto (a guess from

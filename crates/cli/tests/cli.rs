@@ -24,9 +24,17 @@ fn inspect_json_has_the_documented_keys() {
     assert_eq!(v["joint_names"][0], "root");
 }
 
+/// An AMC clip reads with the ASF beside it (`HDM_bd.asf` for `HDM_bd_*`);
+/// alone in a folder it is a clear error naming `--skeleton`.
 #[test]
-fn amc_without_skeleton_is_a_clear_error() {
-    let err = failed(motionaug(&["inspect", KICK]));
+fn amc_finds_its_skeleton_beside_it_or_asks_for_one() {
+    let text = ok(motionaug(&["inspect", KICK, "--json"]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["joints"], 31);
+    let dir = tempfile::tempdir().unwrap();
+    let alone = dir.path().join("HDM_bd_kickLFront1Reps_001_120.amc");
+    std::fs::copy(example("HDM_bd_kickLFront1Reps_001_120.amc"), &alone).unwrap();
+    let err = failed(motionaug(&["inspect", alone.to_str().unwrap()]));
     assert!(err.contains("--skeleton"), "{err}");
 }
 

@@ -79,12 +79,42 @@ fn fps_or_default(fps: Option<f64>) -> f64 {
     fps.unwrap_or(amc::DEFAULT_FPS)
 }
 
+/// The ASF skeleton beside an AMC clip when none is given: `HDM_<actor>.asf`
+/// for `HDM_<actor>_*.amc` (HDM05), `<subject>.asf` for `<subject>_*.amc`
+/// (CMU), else the only `.asf` in the clip's folder.
+pub fn asf_beside(clip: &Path) -> Option<PathBuf> {
+    let dir = clip
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = clip.file_stem()?.to_string_lossy();
+    let parts: Vec<&str> = name.split('_').collect();
+    let mut candidates = Vec::new();
+    if parts.len() > 1 && parts[0] == "HDM" {
+        candidates.push(format!("HDM_{}.asf", parts[1]));
+    }
+    candidates.push(format!("{}.asf", parts[0]));
+    if let Some(found) = candidates.iter().map(|c| dir.join(c)).find(|p| p.is_file()) {
+        return Some(found);
+    }
+    let asfs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("asf")))
+        .collect();
+    (asfs.len() == 1).then(|| asfs[0].clone())
+}
+
 /// Load a clip from disk, dispatching on the extension (see the module doc).
+/// An AMC clip is read with `options.skeleton`, else with [`asf_beside`].
 pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Motion, MotionError> {
     let path = path.as_ref();
     let format = Format::of(path);
-    let skeleton = match (format, &options.skeleton) {
-        (Some(Format::Amc), Some(asf_path)) => Some(asf::read(asf_path)?),
+    let skeleton = match format {
+        Some(Format::Amc) => match options.skeleton.clone().or_else(|| asf_beside(path)) {
+            Some(asf_path) => Some(asf::read(asf_path)?),
+            None => None,
+        },
         _ => None,
     };
     let bytes = read_bytes(path)?;
@@ -94,7 +124,9 @@ pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Motion, Mot
             Some(asf) => amc::parse(&bytes, path, &asf, fps_or_default(options.fps)),
             None => Err(whole(
                 path,
-                "an AMC clip needs its ASF skeleton (pass it with --skeleton FILE.asf)".into(),
+                "an AMC clip needs its ASF skeleton: none beside it (HDM_<actor>.asf, \
+                 <subject>.asf or the folder's only .asf); pass it with --skeleton FILE.asf"
+                    .into(),
             )),
         },
         Some(Format::Asf) => asf::parse(&bytes, path)?.rest_motion(fps_or_default(options.fps)),
@@ -221,6 +253,44 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MotionError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An AMC clip finds its skeleton beside it by the HDM05 and CMU naming
+    /// rules, or as the folder's only ASF; else the error says what to pass.
+    #[test]
+    fn an_amc_clip_finds_the_asf_beside_it() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+        let amc = data.join("HDM_bd_kickLFront1Reps_001_120.amc");
+        assert_eq!(asf_beside(&amc), Some(data.join("HDM_bd.asf")));
+        let found = load(&amc, &LoadOptions::default()).unwrap();
+        let given = load(
+            &amc,
+            &LoadOptions {
+                skeleton: Some(data.join("HDM_bd.asf")),
+                ..LoadOptions::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(found.frames(), given.frames());
+        assert_eq!(found.rotations(), given.rotations());
+
+        let dir = tempfile::tempdir().unwrap();
+        let copy = |from: &str, to: &str| {
+            std::fs::copy(data.join(from), dir.path().join(to)).unwrap();
+        };
+        copy("HDM_bd_kickLFront1Reps_001_120.amc", "07_01.amc");
+        let cmu = dir.path().join("07_01.amc");
+        let e = load(&cmu, &LoadOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("--skeleton"), "{e}");
+        // The only ASF of the folder, whatever its name.
+        copy("HDM_bd.asf", "someone.asf");
+        assert_eq!(asf_beside(&cmu), Some(dir.path().join("someone.asf")));
+        // Two ASFs: the CMU name decides; without it nothing is guessed.
+        copy("HDM_bd.asf", "other.asf");
+        assert_eq!(asf_beside(&cmu), None);
+        copy("HDM_bd.asf", "07.asf");
+        assert_eq!(asf_beside(&cmu), Some(dir.path().join("07.asf")));
+        assert!(load(&cmu, &LoadOptions::default()).is_ok());
+    }
 
     #[test]
     fn dispatch_errors_are_clear() {

@@ -141,31 +141,12 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewerError + '_ {
     }
 }
 
-/// The ASF for an AMC clip: given, `HDM_<actor>.asf`, `<subject>.asf`, or the
-/// only one in the folder.
+/// The ASF for an AMC clip: given, else the one beside it
+/// ([`motion::io::asf_beside`]).
 fn skeleton_for(clip: &Path, given: Option<&Path>) -> Option<PathBuf> {
-    if let Some(s) = given {
-        return Some(s.to_path_buf());
-    }
-    let dir = clip.parent()?;
-    let name = stem(clip);
-    let parts: Vec<&str> = name.split('_').collect();
-    let mut candidates = Vec::new();
-    if parts.len() > 1 && parts[0] == "HDM" {
-        candidates.push(format!("HDM_{}.asf", parts[1]));
-    }
-    candidates.push(format!("{}.asf", parts[0]));
-    for c in candidates {
-        if dir.join(&c).is_file() {
-            return Some(dir.join(c));
-        }
-    }
-    let asfs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .ok()?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| ext(p) == "asf")
-        .collect();
-    (asfs.len() == 1).then(|| asfs[0].clone())
+    given
+        .map(Path::to_path_buf)
+        .or_else(|| motion::io::asf_beside(clip))
 }
 
 /// The frame rate a BVH file states (`Frame Time`), without reading the rest.
