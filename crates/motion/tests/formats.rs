@@ -788,12 +788,19 @@ fn example_clips_load() {
     assert_eq!((walk.frames(), walk.joints()), (534, 31));
     let rest = motion::load(&asf, &Default::default()).unwrap();
     assert_eq!((rest.frames(), rest.joints()), (1, 31));
-    // Without the skeleton an AMC clip is a clear error.
-    let e = motion::load(
+    // Without the skeleton an AMC clip reads with the ASF beside it; alone
+    // in a folder it is a clear error.
+    let beside = motion::load(
         dir.join("HDM_bd_kickLFront1Reps_001_120.amc"),
         &Default::default(),
-    );
-    assert!(e.unwrap_err().to_string().contains("ASF skeleton"));
+    )
+    .unwrap();
+    assert_eq!(beside.frames(), kick.frames());
+    let lone = tempfile::tempdir().unwrap();
+    let alone = lone.path().join("HDM_bd_kickLFront1Reps_001_120.amc");
+    std::fs::copy(dir.join("HDM_bd_kickLFront1Reps_001_120.amc"), &alone).unwrap();
+    let e = motion::load(&alone, &Default::default());
+    assert!(e.is_err_and(|e| e.to_string().contains("ASF skeleton")));
     // save() writes both output formats.
     let out = std::env::temp_dir().join(format!("motion-save-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
