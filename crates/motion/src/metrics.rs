@@ -86,9 +86,10 @@ pub struct Plausibility {
     pub thresholds: Thresholds,
 }
 
-/// The foot points: (joint, Some(end site offset) or None for the joint itself).
-fn foot_points(motion: &Motion) -> Vec<(usize, Option<DVec3>)> {
-    let s = motion.skeleton();
+/// The foot points of a skeleton (see the module doc): each a joint and, for
+/// its end site, the site's offset (`None`: the joint itself). What the foot
+/// skating metric watches; the VAE's foot loss uses the same points.
+pub fn skeleton_foot_points(s: &crate::Skeleton) -> Vec<(usize, Option<DVec3>)> {
     let words = ["foot", "ankle", "toe", "heel"];
     let mut joints: Vec<usize> = (0..s.len())
         .filter(|&j| {
@@ -112,6 +113,10 @@ fn foot_points(motion: &Motion) -> Vec<(usize, Option<DVec3>)> {
         }
     }
     points
+}
+
+fn foot_points(motion: &Motion) -> Vec<(usize, Option<DVec3>)> {
+    skeleton_foot_points(motion.skeleton())
 }
 
 fn point(x: &[Transform], p: (usize, Option<DVec3>)) -> DVec3 {
@@ -291,6 +296,55 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
     }
 }
 
+/// The clip with its root path re-integrated so that planted sole points stay
+/// put: over each step `t -> t+1` the root's horizontal motion loses the mean
+/// horizontal displacement of the sole points in contact ([`foot_contacts`],
+/// the skating metric's rule). Steps without contact (flight, a clip in the
+/// air) keep their root motion; heights and every rotation are unchanged.
+///
+/// Why it exists: a generative model's root path and legs are decoded
+/// separately and drift apart by centimetres per frame, which the skating
+/// metric and a physics tracker both see as sliding feet; when the legs step,
+/// the root follows them ("root from feet").
+pub fn plant_root(motion: &Motion, th: &Thresholds) -> Motion {
+    let contacts = foot_contacts(motion, th);
+    let np = contacts.points.len();
+    let n = motion.frames();
+    let mut out = motion.clone();
+    if np == 0 || n < 2 {
+        return out;
+    }
+    let s = motion.skeleton();
+    let points: Vec<(usize, Option<DVec3>)> = contacts
+        .points
+        .iter()
+        .map(|&(j, site)| (j, if site { s.joint(j).end_site } else { None }))
+        .collect();
+    let mut x = vec![Transform::IDENTITY; motion.joints()];
+    let mut pos = Vec::with_capacity(n * np);
+    for t in 0..n {
+        motion.world_transforms_into(t, &mut x);
+        pos.extend(points.iter().map(|p| point(&x, *p)));
+    }
+    let mut shift = DVec3::ZERO;
+    let root = out.root_translation_mut();
+    for t in 0..n - 1 {
+        let (mut slide, mut k) = (DVec3::ZERO, 0usize);
+        for i in 0..np {
+            if contacts.steps[t * np + i].is_some() {
+                let d = pos[(t + 1) * np + i] - pos[t * np + i];
+                slide += DVec3::new(d.x, 0.0, d.z);
+                k += 1;
+            }
+        }
+        if k > 0 {
+            shift -= slide / k as f64;
+        }
+        root[t + 1] += shift;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,6 +433,28 @@ mod tests {
         }
         let floating = foot_contacts(&standing(20, 0.3, 0.2), &th);
         assert!(floating.steps.iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn planting_the_root_stops_sliding_feet_and_leaves_flight_alone() {
+        let th = Thresholds::default();
+        let sliding = standing(40, 0.5, 0.0);
+        let planted = plant_root(&sliding, &th);
+        let p = plausibility(&planted);
+        assert!(p.foot_skating_m_s < 1e-9, "{p:?}");
+        assert!((p.contact_fraction - 1.0).abs() < 1e-12);
+        // Heights and rotations are untouched.
+        for t in 0..40 {
+            assert_eq!(
+                planted.root_translation()[t].y,
+                sliding.root_translation()[t].y
+            );
+            assert_eq!(planted.pose(t), sliding.pose(t));
+        }
+        // In the air nothing is in contact: the root path is kept.
+        let flying = standing(20, 0.3, 0.2);
+        let kept = plant_root(&flying, &th);
+        assert_eq!(kept.root_translation(), flying.root_translation());
     }
 
     #[test]

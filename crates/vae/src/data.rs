@@ -8,7 +8,7 @@ use candle_core::{Device, Tensor};
 use motion::{Motion, Skeleton};
 
 use crate::error::{Result, VaeError};
-use crate::features::{FeatureConfig, clip_frames, frame_dim};
+use crate::features::{FeatureConfig, clip_frames_on, frame_dim};
 use crate::normalize::NormStats;
 
 pub struct Dataset {
@@ -54,7 +54,7 @@ impl Dataset {
         let dim = frame_dim(skeleton.len());
         let raw: Vec<Vec<f32>> = clips
             .iter()
-            .map(|c| clip_frames(c, features))
+            .map(|c| clip_frames_on(c, features, &skeleton))
             .collect::<Result<_>>()?;
         let stats = NormStats::fit(&raw, dim)?;
         let normalised = raw.iter().map(|c| stats.normalise(c)).collect();

@@ -129,6 +129,48 @@ pub fn clip_frames(motion: &Motion, config: &FeatureConfig) -> Result<Vec<f32>> 
     }
 }
 
+/// Height of the root above the lowest point (joint or end site) of the rest
+/// pose, metres: the leg length that sets how far a step carries the root.
+pub fn hip_height(skeleton: &Skeleton) -> f64 {
+    let n = skeleton.len();
+    let mut x = vec![motion::Transform::IDENTITY; n];
+    skeleton.forward(DVec3::ZERO, &vec![DQuat::IDENTITY; n], &mut x);
+    let mut lowest = 0.0f64;
+    for (j, t) in x.iter().enumerate() {
+        lowest = lowest.min(t.translation.y);
+        if let Some(e) = skeleton.joint(j).end_site {
+            lowest = lowest.min((t.translation + t.rotation * e).y);
+        }
+    }
+    -lowest
+}
+
+/// The frames of a clip as the skeleton `model` would perform it: [`clip_frames`]
+/// with the root path scaled by the ratio of the two skeletons' hip heights.
+///
+/// Why: a class's clips come from actors of different sizes (HDM05's bk has legs
+/// 14 % longer than bd's) and a model decodes every clip on one skeleton. Without
+/// the scaling a tall actor's root height makes the model's feet float and a
+/// short one's sink, and a long stride on short legs can only slide.
+pub fn clip_frames_on(
+    motion: &Motion,
+    config: &FeatureConfig,
+    model: &Skeleton,
+) -> Result<Vec<f32>> {
+    let mut frames = clip_frames(motion, config)?;
+    let own = hip_height(motion.skeleton());
+    let target = hip_height(model);
+    if own > 1e-6 && target > 1e-6 && (own - target).abs() > 1e-9 {
+        let k = (target / own) as f32;
+        for frame in frames.chunks_exact_mut(frame_dim(motion.joints())) {
+            for v in &mut frame[..3] {
+                *v *= k;
+            }
+        }
+    }
+    Ok(frames)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -205,6 +247,54 @@ mod tests {
             let rel_a = m.rotation(0, 0).inverse() * m.rotation(1, 0);
             let rel_b = back.rotation(0, 0).inverse() * back.rotation(1, 0);
             prop_assert!(motion::rotation::angle_between(rel_a, rel_b) < 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_taller_actors_root_path_is_scaled_to_the_models_legs() {
+        // skeleton(): a root with one joint 0.5 m above it (no leg below the
+        // root), so give both skeletons a leg hanging down.
+        let leg = |length: f64| {
+            let joint = |name: &str, parent, offset| Joint {
+                name: name.into(),
+                parent,
+                offset,
+                channels: vec![],
+                end_site: None,
+                limits: None,
+            };
+            Arc::new(
+                Skeleton::new(
+                    vec![
+                        joint("root", None, DVec3::ZERO),
+                        joint("foot", Some(0), DVec3::new(0.0, -length, 0.0)),
+                    ],
+                    1.0,
+                )
+                .unwrap(),
+            )
+        };
+        let (short, tall) = (leg(0.8), leg(1.0));
+        assert!((hip_height(&tall) - 1.0).abs() < 1e-12);
+        let roots = vec![DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.5, 1.1, 0.2)];
+        let m = Motion::new(tall.clone(), 30.0, roots, vec![DQuat::IDENTITY; 4]).unwrap();
+        let config = FeatureConfig::default();
+        let own = clip_frames_on(&m, &config, &tall).unwrap();
+        assert_eq!(
+            own,
+            clip_frames(&m, &config).unwrap(),
+            "same legs: unchanged"
+        );
+        let scaled = clip_frames_on(&m, &config, &short).unwrap();
+        let dim = frame_dim(2);
+        for t in 0..2 {
+            for k in 0..3 {
+                assert!((scaled[t * dim + k] - 0.8 * own[t * dim + k]).abs() < 1e-6);
+            }
+            assert_eq!(
+                scaled[t * dim + 3..(t + 1) * dim],
+                own[t * dim + 3..(t + 1) * dim]
+            );
         }
     }
 

@@ -142,6 +142,12 @@ impl LatentStats {
 
     /// One code by sampling near samples.
     pub fn sample_near(&self, rng: &mut impl Rng) -> Vec<f32> {
+        self.sample_near_members(rng).0
+    }
+
+    /// One code by sampling near samples, and the training clips it was drawn
+    /// between.
+    pub fn sample_near_members(&self, rng: &mut impl Rng) -> (Vec<f32>, Vec<usize>) {
         let clusters = self.clusters();
         let total: usize = clusters.iter().map(Vec::len).sum();
         let mut pick = rng.random_range(0..total);
@@ -159,14 +165,15 @@ impl LatentStats {
             .map(|k| cluster[k])
             .collect();
         let d = self.latent();
-        (0..d)
+        let z = (0..d)
             .map(|j| {
                 let mean = chosen.iter().map(|&i| self.mu[i][j]).sum::<f32>() / n as f32;
                 let var = chosen.iter().map(|&i| self.logvar[i][j].exp()).sum::<f32>() / n as f32;
                 let e: f32 = StandardNormal.sample(rng);
                 mean + var.sqrt() * e
             })
-            .collect()
+            .collect();
+        (z, chosen)
     }
 }
 

@@ -11,12 +11,16 @@
 //!   the `nn` crate's seeded parameters, Linear, MLP and LayerNorm.
 //! * [`loss`], [`train`]: losses and the training loop (the `nn` crate's
 //!   SGD/Adam optimiser and KL term).
+//! * [`feet`]: forward kinematics of the foot points on tensors, and the foot
+//!   terms (foot position and velocity against the capture; skating and floor
+//!   penetration of clips decoded from codes mixed between training clips).
 //! * [`latent`]: PCA + k-means clustering of training posteriors, near sampling.
 //! * [`trained`]: a trained model: encode, decode, sample, save, load.
 
 pub mod data;
 pub mod error;
 pub mod features;
+pub mod feet;
 pub mod latent;
 pub mod loss;
 pub mod lstm;
@@ -27,6 +31,7 @@ pub mod trained;
 
 pub use error::{Result, VaeError};
 pub use features::FeatureConfig;
+pub use feet::FootLoss;
 pub use latent::{NearConfig, Prior};
 pub use model::VaeConfig;
 pub use nn::OptimizerConfig;

@@ -10,14 +10,15 @@ use std::time::Instant;
 
 use candle_core::Tensor;
 use motion::Motion;
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Batch, Dataset};
 use crate::error::{Result, VaeError};
 use crate::features::FeatureConfig;
+use crate::feet::{self, FootKinematics, FootLoss};
 use crate::latent::{LatentStats, NearConfig};
 use crate::loss::{self, Denorm, LossWeights};
 use crate::model::{DISCRIMINATORS, GENERATOR, Vae, VaeConfig};
@@ -30,11 +31,18 @@ pub struct TrainConfig {
     pub features: FeatureConfig,
     /// Used for the generator and (a fresh copy) for the discriminators.
     pub optimizer: OptimizerConfig,
+    /// With Adam: the rate follows a cosine from the configured rate down to
+    /// this fraction of it at the last iteration (`None`: constant). Ignored
+    /// with SGD, which has its own halving schedule.
+    pub cosine_to: Option<f64>,
     pub iterations: u64,
     /// Clips per iteration; a class smaller than this is one full batch.
     pub batch_size: usize,
     pub adversarial: bool,
     pub weights: LossWeights,
+    /// Foot terms through forward kinematics (`feet`); off on a skeleton
+    /// without foot joints.
+    pub feet: FootLoss,
     /// Global gradient-norm clip for both optimisers (LSTMs like it).
     pub max_grad_norm: Option<f32>,
     pub near: NearConfig,
@@ -48,10 +56,12 @@ impl Default for TrainConfig {
             model: VaeConfig::default(),
             features: FeatureConfig::default(),
             optimizer: OptimizerConfig::default(),
+            cosine_to: Some(0.1),
             iterations: 1500,
             batch_size: 128,
             adversarial: true,
             weights: LossWeights::default(),
+            feet: FootLoss::default(),
             max_grad_norm: Some(1.0),
             near: NearConfig::default(),
             seed: 0,
@@ -78,6 +88,15 @@ impl TrainConfig {
         self.model.validate()?;
         self.optimizer.validate()?;
         self.weights.validate()?;
+        self.feet.validate()?;
+        if self
+            .cosine_to
+            .is_some_and(|f| !(f.is_finite() && f > 0.0 && f <= 1.0))
+        {
+            return Err(VaeError::Config(
+                "cosine_to must be a fraction in (0, 1]".into(),
+            ));
+        }
         self.near.validate()?;
         if self.iterations == 0 || self.batch_size == 0 {
             return Err(VaeError::Config(
@@ -113,6 +132,18 @@ pub struct Losses {
     pub adversarial: f32,
     /// Discriminator hinge loss (frame + sequence), 0 without adversarial training.
     pub discriminator: f32,
+    /// Mean squared foot point distance to the capture, m^2 (0 without foot terms).
+    #[serde(default)]
+    pub foot_position: f32,
+    /// Mean squared foot velocity difference, (m/s)^2.
+    #[serde(default)]
+    pub foot_velocity: f32,
+    /// Contact-weighted squared horizontal foot speed of mixed-code decodes, (m/s)^2.
+    #[serde(default)]
+    pub skating: f32,
+    /// Mean squared foot depth below the ground, m^2.
+    #[serde(default)]
+    pub floor: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -136,7 +167,28 @@ pub struct Trainer {
     rng: ChaCha8Rng,
     order: Vec<usize>,
     cursor: usize,
-    full_batch: Option<(Batch, Tensor)>,
+    full_batch: Option<Prepared>,
+    /// Foot kinematics of the training skeleton, when the foot terms are on.
+    feet: Option<FootKinematics>,
+}
+
+/// A batch with what the loss compares it to: rotation matrices and foot positions.
+struct Prepared {
+    batch: Batch,
+    rotations: Tensor,
+    feet: Option<Tensor>,
+}
+
+impl Prepared {
+    fn new(batch: Batch, feet: Option<&FootKinematics>) -> Result<Self> {
+        let rotations = loss::rotation_matrices(&batch.raw)?;
+        let feet = feet.map(|fk| fk.positions(&batch.raw)).transpose()?;
+        Ok(Prepared {
+            batch,
+            rotations,
+            feet,
+        })
+    }
 }
 
 impl Trainer {
@@ -155,11 +207,14 @@ impl Trainer {
             config.optimizer,
             config.max_grad_norm,
         );
+        let feet = if config.feet.is_off() {
+            None
+        } else {
+            FootKinematics::new(&data.skeleton)
+        };
         let full_batch = if data.len() <= config.batch_size {
             let all: Vec<usize> = (0..data.len()).collect();
-            let b = data.batch(&all)?;
-            let rot = loss::rotation_matrices(&b.raw)?;
-            Some((b, rot))
+            Some(Prepared::new(data.batch(&all)?, feet.as_ref())?)
         } else {
             None
         };
@@ -174,20 +229,23 @@ impl Trainer {
             gen_opt,
             dis_opt,
             full_batch,
+            feet,
         })
     }
 
-    fn next_batch(&mut self) -> Result<(Batch, Tensor)> {
-        if let Some((b, r)) = &self.full_batch {
-            return Ok((
-                Batch {
+    fn next_batch(&mut self) -> Result<Prepared> {
+        if let Some(p) = &self.full_batch {
+            let b = &p.batch;
+            return Ok(Prepared {
+                batch: Batch {
                     x: b.x.clone(),
                     raw: b.raw.clone(),
                     mask: b.mask.clone(),
                     lengths: b.lengths.clone(),
                 },
-                r.clone(),
-            ));
+                rotations: p.rotations.clone(),
+                feet: p.feet.clone(),
+            });
         }
         let bs = self.config.batch_size;
         if self.cursor.saturating_add(bs) > self.order.len() {
@@ -196,31 +254,115 @@ impl Trainer {
         }
         let idx = self.order[self.cursor..self.cursor + bs].to_vec();
         self.cursor += bs;
-        let b = self.data.batch(&idx)?;
-        let r = loss::rotation_matrices(&b.raw)?;
-        Ok((b, r))
+        Prepared::new(self.data.batch(&idx)?, self.feet.as_ref())
+    }
+
+    /// Codes drawn between two random clips of the batch, as sampling near
+    /// samples draws them (mean of the two posteriors' means, their mean
+    /// variance), detached, each with a mask as long as the mean of the two
+    /// clips' lengths: `(codes (B, latent), mask (B, T))`.
+    fn mixed_codes(
+        &mut self,
+        mu: &Tensor,
+        logvar: &Tensor,
+        lengths: &[usize],
+        frames: usize,
+    ) -> Result<(Tensor, Tensor)> {
+        let (b, latent) = mu.dims2()?;
+        let pick = |rng: &mut ChaCha8Rng| -> Vec<u32> {
+            (0..b).map(|_| rng.random_range(0..b) as u32).collect()
+        };
+        let i = pick(&mut self.rng);
+        let j = pick(&mut self.rng);
+        let mut mask = vec![0.0f32; b * frames];
+        for (k, (&a, &c)) in i.iter().zip(&j).enumerate() {
+            let n = (lengths[a as usize] + lengths[c as usize])
+                .div_ceil(2)
+                .min(frames);
+            mask[k * frames..k * frames + n].fill(1.0);
+        }
+        let dev = mu.device();
+        let ii = Tensor::from_vec(i, b, dev)?;
+        let jj = Tensor::from_vec(j, b, dev)?;
+        let (mu, logvar) = (mu.detach(), logvar.detach());
+        let mean = ((mu.index_select(&ii, 0)? + mu.index_select(&jj, 0)?)? * 0.5)?;
+        let var =
+            ((logvar.index_select(&ii, 0)?.exp()? + logvar.index_select(&jj, 0)?.exp()?)? * 0.5)?;
+        let eps = nn::normal(&[b, latent], &mut self.rng)?;
+        let z = (mean + (var.sqrt()? * eps)?)?;
+        Ok((z, Tensor::from_vec(mask, (b, frames), dev)?))
     }
 
     pub fn lr(&self) -> f64 {
         self.gen_opt.lr()
     }
 
+    /// The learning rate of iteration `it` (0-based) under the cosine schedule.
+    fn scheduled_lr(&self, it: u64) -> Option<f64> {
+        let OptimizerConfig::Adam { lr } = self.config.optimizer else {
+            return None;
+        };
+        let end = self.config.cosine_to?;
+        let x = it as f64 / self.config.iterations.max(1) as f64;
+        Some(lr * (end + (1.0 - end) * 0.5 * (1.0 + (std::f64::consts::PI * x).cos())))
+    }
+
     /// One generator step (and one discriminator step when adversarial).
     pub fn step(&mut self) -> Result<Losses> {
-        let (batch, target_rot) = self.next_batch()?;
-        let vae = &self.vae;
+        let prepared = self.next_batch()?;
+        let batch = &prepared.batch;
         let w = self.config.weights;
-        let (mu, logvar) = vae.encoder.forward(&batch.x, &batch.mask)?;
+        let wf = self.config.feet;
+        let (mu, logvar) = self.vae.encoder.forward(&batch.x, &batch.mask)?;
         let (b, latent) = mu.dims2()?;
         let eps = nn::normal(&[b, latent], &mut self.rng)?;
         let z = nn::reparameterise(&mu, &logvar, &eps)?;
         let frames = batch.x.dim(1)?;
-        let xhat = vae.decoder.forward(&z, frames)?;
-        let raw_hat = self.denorm.apply(&xhat)?;
-        let (root, rot) = loss::reconstruction(&raw_hat, &batch.raw, &target_rot, &batch.mask)?;
+        // Codes between training clips, decoded in the same pass: they have no
+        // captured counterpart, only the skating and floor terms judge them.
+        let mixed = if self.feet.is_some() && (wf.skating > 0.0 || wf.floor > 0.0) {
+            Some(self.mixed_codes(&mu, &logvar, &batch.lengths, frames)?)
+        } else {
+            None
+        };
+        let vae = &self.vae;
+        let z_all = match &mixed {
+            Some((zm, _)) => Tensor::cat(&[&z, zm], 0)?,
+            None => z,
+        };
+        let decoded = vae.decoder.forward(&z_all, frames)?;
+        let raw_all = self.denorm.apply(&decoded)?;
+        let xhat = decoded.narrow(0, 0, b)?;
+        let raw_hat = raw_all.narrow(0, 0, b)?;
+        let (root, rot) =
+            loss::reconstruction(&raw_hat, &batch.raw, &prepared.rotations, &batch.mask)?;
         let smooth = loss::smoothness(&raw_hat, &batch.mask)?;
         let kl = nn::kl_mean(&mu, &logvar)?;
         let mut total = ((&root + &rot)? + ((smooth.clone() * w.smooth)? + (kl.clone() * w.kl)?)?)?;
+        let mut foot = [0.0f32; 4];
+        if let (Some(fk), Some(target)) = (&self.feet, &prepared.feet) {
+            let fps = self.config.features.fps;
+            let pos_all = fk.positions(&raw_all)?;
+            let pos = pos_all.narrow(0, 0, b)?;
+            let position = feet::position_error(&pos, target, &batch.mask)?;
+            let velocity = feet::velocity_error(&pos, target, &batch.mask, fps)?;
+            let mut floor = feet::floor(&pos, &batch.mask)?;
+            let mut skating = Tensor::zeros((), floor.dtype(), floor.device())?;
+            if let Some((_, mask)) = &mixed {
+                let pm = pos_all.narrow(0, b, pos_all.dim(0)? - b)?;
+                skating = feet::skating(&pm, mask, fps, wf.contact_height_m)?;
+                floor = (floor + feet::floor(&pm, mask)?)?;
+            }
+            foot = [
+                position.to_scalar()?,
+                velocity.to_scalar()?,
+                skating.to_scalar()?,
+                floor.to_scalar()?,
+            ];
+            let terms = ((position * wf.position)? + (velocity * wf.velocity)?)?;
+            let terms = (terms + ((skating * wf.skating)? + (floor * wf.floor)?)?)?;
+            total = (total + terms)?;
+        }
         let mut adv = 0.0;
         if self.config.adversarial {
             let g = (loss::hinge_generator(&vae.frame_disc.forward(&xhat)?, Some(&batch.mask))?
@@ -253,6 +395,10 @@ impl Trainer {
             kl: kl.to_scalar()?,
             adversarial: adv,
             discriminator: disc,
+            foot_position: foot[0],
+            foot_velocity: foot[1],
+            skating: foot[2],
+            floor: foot[3],
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {
@@ -271,6 +417,10 @@ impl Trainer {
         let start = Instant::now();
         let mut last = Losses::default();
         for it in 0..self.config.iterations {
+            if let Some(lr) = self.scheduled_lr(it) {
+                self.gen_opt.set_lr(lr);
+                self.dis_opt.set_lr(lr);
+            }
             let lr = self.lr();
             last = self.step()?;
             progress(&Progress {
@@ -304,7 +454,9 @@ impl Trainer {
                 iterations: self.config.iterations,
                 adversarial: self.config.adversarial,
                 optimizer: self.config.optimizer,
+                cosine_to: self.config.cosine_to,
                 weights: self.config.weights,
+                feet: self.config.feet,
                 seed: self.config.seed,
                 final_losses: last,
                 seconds,

@@ -3,10 +3,11 @@
 //! and the training set's latent posteriors (for sampling near samples).
 //!
 //! On disk, a model directory holds `weights.safetensors` and `model.json`.
-//! Samples are motions on the training skeleton (the first training clip's: the
-//! clips of a class come from one actor, or the caller accepts the first one's
-//! bone lengths), at the feature frame rate, starting above the origin facing +z,
-//! with a length drawn from the training clips' lengths.
+//! Samples are motions on the training skeleton (the first training clip's; the
+//! other clips' root paths were scaled to its hip height, `features::clip_frames_on`),
+//! at the feature frame rate, starting above the origin facing +z. A near sample
+//! is as long as the mean of the clips it was drawn between; a prior sample takes
+//! a random training clip's length.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -19,7 +20,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
-use crate::features::{FeatureConfig, clip_frames, frame_dim, frames_to_motion};
+use crate::features::{FeatureConfig, clip_frames_on, frame_dim, frames_to_motion};
+use crate::feet::FootLoss;
 use crate::latent::{LatentStats, Prior, sample_normal};
 use crate::loss::LossWeights;
 use crate::model::{Vae, VaeConfig};
@@ -37,7 +39,13 @@ pub struct TrainingSummary {
     pub iterations: u64,
     pub adversarial: bool,
     pub optimizer: OptimizerConfig,
+    /// Cosine learning-rate decay to this fraction (models saved before it: none).
+    #[serde(default)]
+    pub cosine_to: Option<f64>,
     pub weights: LossWeights,
+    /// Foot terms (models saved before they existed trained without them).
+    #[serde(default = "FootLoss::off")]
+    pub feet: FootLoss,
     pub seed: u64,
     pub final_losses: Losses,
     pub seconds: f64,
@@ -97,6 +105,13 @@ impl TrainedVae {
                 "training lengths are missing or zero".into(),
             ));
         }
+        if meta.lengths.len() != meta.latents.mu.len() {
+            return Err(VaeError::Model(format!(
+                "{} training lengths for {} training codes",
+                meta.lengths.len(),
+                meta.latents.mu.len()
+            )));
+        }
         let skeleton = Arc::new(meta.skeleton.clone());
         Ok(TrainedVae {
             vae,
@@ -126,10 +141,10 @@ impl TrainedVae {
                     self.skeleton.len()
                 )));
             }
-            let frames = self
-                .meta
-                .stats
-                .normalise(&clip_frames(c, &self.meta.features)?);
+            let frames =
+                self.meta
+                    .stats
+                    .normalise(&clip_frames_on(c, &self.meta.features, &self.skeleton)?);
             let t = frames.len() / dim;
             let x = Tensor::from_vec(frames, (1, t, dim), &Device::Cpu)?;
             let mask = Tensor::ones((1, t), candle_core::DType::F32, &Device::Cpu)?;
@@ -173,7 +188,10 @@ impl TrainedVae {
         let (mu, _) = self.encode(clips)?;
         let lengths: Vec<usize> = clips
             .iter()
-            .map(|c| clip_frames(c, &self.meta.features).map(|f| f.len() / self.vae.frame_dim))
+            .map(|c| {
+                clip_frames_on(c, &self.meta.features, &self.skeleton)
+                    .map(|f| f.len() / self.vae.frame_dim)
+            })
             .collect::<Result<_>>()?;
         self.decode(&mu, &lengths)
     }
@@ -184,8 +202,11 @@ impl TrainedVae {
         let features = self.meta.features;
         let (mut root_sq, mut angle, mut frames, mut rotations) = (0.0, 0.0, 0usize, 0usize);
         for (c, r) in clips.iter().zip(&recon) {
-            let original =
-                frames_to_motion(&self.skeleton, features.fps, &clip_frames(c, &features)?)?;
+            let original = frames_to_motion(
+                &self.skeleton,
+                features.fps,
+                &clip_frames_on(c, &features, &self.skeleton)?,
+            )?;
             for t in 0..original.frames() {
                 root_sq +=
                     (original.root_translation()[t] - r.root_translation()[t]).length_squared();
@@ -202,18 +223,41 @@ impl TrainedVae {
         })
     }
 
-    /// `count` clips; codes from `prior`, lengths drawn from the training lengths.
-    /// The same seed gives the same clips.
+    /// `count` clips; codes from `prior` (see [`TrainedVae::sample_decoded`]),
+    /// each with its root path re-integrated from its planted feet
+    /// (`motion::metrics::plant_root`), so that the root goes where the legs
+    /// step. The same seed gives the same clips.
     pub fn sample(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
+        let th = motion::metrics::Thresholds::default();
+        let mut samples = self.sample_decoded(count, prior, seed)?;
+        for s in &mut samples {
+            s.motion = motion::metrics::plant_root(&s.motion, &th);
+        }
+        Ok(samples)
+    }
+
+    /// `count` clips as the decoder gives them; codes from `prior`, lengths from
+    /// the clips a near code was drawn between (a random training clip's for the
+    /// normal prior). The same seed gives the same clips.
+    pub fn sample_decoded(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut codes = Vec::with_capacity(count);
         let mut lengths = Vec::with_capacity(count);
         for _ in 0..count {
-            lengths.push(self.meta.lengths[rng.random_range(0..self.meta.lengths.len())]);
-            codes.push(match prior {
-                Prior::Normal => sample_normal(self.meta.config.latent, &mut rng),
-                Prior::Near => self.meta.latents.sample_near(&mut rng),
-            });
+            match prior {
+                Prior::Normal => {
+                    lengths.push(self.meta.lengths[rng.random_range(0..self.meta.lengths.len())]);
+                    codes.push(sample_normal(self.meta.config.latent, &mut rng));
+                }
+                Prior::Near => {
+                    // As long as the clips whose codes it mixes: the decoder runs
+                    // on past the end of a short clip's motion otherwise.
+                    let (z, members) = self.meta.latents.sample_near_members(&mut rng);
+                    let total: usize = members.iter().map(|&i| self.meta.lengths[i]).sum();
+                    lengths.push((total as f64 / members.len() as f64).round().max(1.0) as usize);
+                    codes.push(z);
+                }
+            }
         }
         let mut out = Vec::with_capacity(count);
         // Decode in chunks to bound memory on large counts.

@@ -59,6 +59,9 @@ enum What {
     /// Training cost of a prediction model (DMGNN, V-DMGNN-GAN): seconds per
     /// iteration and windows per second of the real training loop.
     Predictor(PredictorArgs),
+    /// VAE training curve and wall time per class and loss variant, and the
+    /// skating, penetration and MMD of its near samples.
+    Vae(super::bench_vae::Args),
 }
 
 #[derive(clap::Args)]
@@ -426,6 +429,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Correction(a) => bench_correction(a),
         What::Predictor(a) => bench_predictor(a),
+        What::Vae(a) => super::bench_vae::run(a),
         What::Soles {
             data,
             classes,

@@ -2,6 +2,7 @@
 
 pub mod augment;
 pub mod bench;
+pub mod bench_vae;
 pub mod convert;
 pub mod correct;
 pub mod debias;

@@ -1,0 +1,384 @@
+//! Where the feet are, differentiably: forward kinematics of the foot chains on
+//! candle tensors, and the foot terms of the loss.
+//!
+//! Why it exists: the VAE's features are a root position plus joint rotations,
+//! and a loss on those alone lets the root slide while the legs step in place:
+//! decoded samples skated 3-16x more than the captured clips (eval README,
+//! session 4). Comparing where the feet land, how fast they move, and
+//! penalising planted feet that slide or sink ties the root path to the legs.
+//!
+//! The foot points are the ones the foot skating metric watches
+//! (`motion::metrics::skeleton_foot_points`): joints named foot / ankle / toe /
+//! heel and their end sites. Only the joints on the paths from the root to them
+//! are transformed (11 of HDM05's 31), so the cost is a few batched 3x3 products
+//! per frame.
+
+use candle_core::{D, Device, Tensor};
+use motion::Skeleton;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, VaeError};
+use crate::loss::{masked_frame_mean, rotation_matrices};
+
+/// Weights and thresholds of the foot terms (all 0: the plain VAE loss).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FootLoss {
+    /// On the mean squared distance (m^2) between reconstructed and captured
+    /// foot points.
+    pub position: f64,
+    /// On the mean squared difference of foot point velocities ((m/s)^2).
+    pub velocity: f64,
+    /// On the contact-weighted mean squared horizontal foot speed ((m/s)^2) of
+    /// clips decoded from codes mixed between training clips, which have no
+    /// captured counterpart; what sampling near samples decodes.
+    pub skating: f64,
+    /// On the mean squared depth (m^2) of foot points below the ground (y = 0),
+    /// reconstructions and mixed codes alike.
+    pub floor: f64,
+    /// A foot point lower than this (m) counts as touching for the skating term
+    /// (smoothly: a logistic step 1 cm wide).
+    pub contact_height_m: f64,
+}
+
+impl Default for FootLoss {
+    fn default() -> Self {
+        FootLoss {
+            position: 1.0,
+            velocity: 0.01,
+            skating: 0.1,
+            floor: 10.0,
+            contact_height_m: 0.05,
+        }
+    }
+}
+
+impl FootLoss {
+    /// No foot terms (the loss of sessions before 10; an ablation).
+    pub fn off() -> Self {
+        FootLoss {
+            position: 0.0,
+            velocity: 0.0,
+            skating: 0.0,
+            floor: 0.0,
+            ..FootLoss::default()
+        }
+    }
+
+    pub fn is_off(&self) -> bool {
+        self.position == 0.0 && self.velocity == 0.0 && self.skating == 0.0 && self.floor == 0.0
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("position", self.position),
+            ("velocity", self.velocity),
+            ("skating", self.skating),
+            ("floor", self.floor),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(VaeError::Config(format!(
+                    "foot loss weight {name} = {v}: must be a finite number >= 0"
+                )));
+            }
+        }
+        if !(self.contact_height_m.is_finite() && self.contact_height_m > 0.0) {
+            return Err(VaeError::Config(format!(
+                "foot contact height {} m must be > 0",
+                self.contact_height_m
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One joint on a path from the root to a foot point.
+struct ChainJoint {
+    /// Skeleton index.
+    joint: usize,
+    /// Index into the chain of the parent, `None` for the root.
+    parent: Option<usize>,
+    /// Offset from the parent in the parent's frame, metres.
+    offset: [f32; 3],
+}
+
+/// Forward kinematics of the foot points of one skeleton.
+pub struct FootKinematics {
+    joints: usize,
+    chain: Vec<ChainJoint>,
+    /// Chain index and end-site offset (`None`: the joint's own position).
+    points: Vec<(usize, Option<[f32; 3]>)>,
+}
+
+fn f32x3(v: motion::glam::DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+impl FootKinematics {
+    /// `None` when the skeleton has no foot points.
+    pub fn new(skeleton: &Skeleton) -> Option<Self> {
+        let feet = motion::metrics::skeleton_foot_points(skeleton);
+        if feet.is_empty() {
+            return None;
+        }
+        let mut on_chain = vec![false; skeleton.len()];
+        for &(j, _) in &feet {
+            on_chain[j] = true;
+            for a in skeleton.ancestors(j) {
+                on_chain[a] = true;
+            }
+        }
+        let mut index = vec![usize::MAX; skeleton.len()];
+        let mut chain = Vec::new();
+        // Joints are in topological order: a parent is on the chain before its child.
+        for j in (0..skeleton.len()).filter(|&j| on_chain[j]) {
+            index[j] = chain.len();
+            chain.push(ChainJoint {
+                joint: j,
+                parent: skeleton.parent(j).map(|p| index[p]),
+                offset: f32x3(skeleton.joint(j).offset),
+            });
+        }
+        let points = feet
+            .iter()
+            .map(|&(j, e)| (index[j], e.map(f32x3)))
+            .collect();
+        Some(FootKinematics {
+            joints: skeleton.len(),
+            chain,
+            points,
+        })
+    }
+
+    pub fn points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// World positions `(B, T, P, 3)` of the foot points of raw frames
+    /// `(B, T, 3 + 6 J)` (root position, then 6D rotations).
+    pub fn positions(&self, raw: &Tensor) -> Result<Tensor> {
+        let (b, t, f) = raw.dims3()?;
+        if f != 3 + 6 * self.joints {
+            return Err(VaeError::Data(format!(
+                "frames of {f} numbers for a {}-joint skeleton",
+                self.joints
+            )));
+        }
+        let n = b * t;
+        // Rows of each joint's 3x3 block are the columns of its rotation, so the
+        // block is R^T: globals compose as M_child = M_local * M_parent and a
+        // parent-frame offset o lands at o^T * M_parent.
+        let local = rotation_matrices(raw)?.reshape((n, self.joints, 3, 3))?;
+        let root = raw.narrow(2, 0, 3)?.reshape((n, 1, 3))?;
+        let mut global: Vec<Tensor> = Vec::with_capacity(self.chain.len());
+        let mut position: Vec<Tensor> = Vec::with_capacity(self.chain.len());
+        for c in &self.chain {
+            let m = local.narrow(1, c.joint, 1)?.squeeze(1)?;
+            match c.parent {
+                None => {
+                    global.push(m);
+                    position.push(root.clone());
+                }
+                Some(p) => {
+                    let o = Tensor::from_slice(&c.offset, (1, 1, 3), &Device::Cpu)?;
+                    position.push((&position[p] + o.broadcast_matmul(&global[p])?)?);
+                    global.push(m.matmul(&global[p])?);
+                }
+            }
+        }
+        let mut out = Vec::with_capacity(self.points.len());
+        for &(c, site) in &self.points {
+            out.push(match site {
+                None => position[c].clone(),
+                Some(e) => {
+                    let e = Tensor::from_slice(&e, (1, 1, 3), &Device::Cpu)?;
+                    (&position[c] + e.broadcast_matmul(&global[c])?)?
+                }
+            });
+        }
+        Ok(Tensor::cat(&out, 1)?.reshape((b, t, self.points.len(), 3))?)
+    }
+}
+
+/// Mean over valid frames of the squared distance between foot points `(B, T, P, 3)`.
+pub fn position_error(pred: &Tensor, target: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    let d = (pred - target)?.sqr()?.sum(D::Minus1)?.mean(D::Minus1)?;
+    masked_frame_mean(&d, mask)
+}
+
+/// Frame-to-frame velocities `(B, T - 1, P, 3)` in m/s.
+fn velocities(pos: &Tensor, fps: f64) -> Result<Tensor> {
+    let t = pos.dim(1)?;
+    Ok(((pos.narrow(1, 1, t - 1)? - pos.narrow(1, 0, t - 1)?)? * fps)?)
+}
+
+/// Steps `t -> t+1` with both frames valid (padding is at the end).
+fn step_mask(mask: &Tensor) -> Result<Tensor> {
+    let t = mask.dim(1)?;
+    Ok(mask.narrow(1, 1, t - 1)?)
+}
+
+/// Mean squared difference of foot velocities ((m/s)^2) over valid steps.
+pub fn velocity_error(pred: &Tensor, target: &Tensor, mask: &Tensor, fps: f64) -> Result<Tensor> {
+    if pred.dim(1)? < 2 {
+        return Ok(Tensor::zeros((), pred.dtype(), pred.device())?);
+    }
+    let d = (velocities(pred, fps)? - velocities(target, fps)?)?
+        .sqr()?
+        .sum(D::Minus1)?
+        .mean(D::Minus1)?;
+    masked_frame_mean(&d, &step_mask(mask)?)
+}
+
+/// Contact-weighted mean squared horizontal speed ((m/s)^2) of foot points
+/// `(B, T, P, 3)`: each step weighs `sigmoid((h - y) / 1 cm)` with `y` the
+/// point's higher height over the step, taken as a constant (the term slows a
+/// planted foot; it does not lift it off the ground to escape).
+pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> Result<Tensor> {
+    let t = pos.dim(1)?;
+    if t < 2 {
+        return Ok(Tensor::zeros((), pos.dtype(), pos.device())?);
+    }
+    let v = velocities(pos, fps)?;
+    let horizontal = (v.narrow(3, 0, 1)?.sqr()? + v.narrow(3, 2, 1)?.sqr()?)?.squeeze(3)?;
+    let y = pos.narrow(3, 1, 1)?.squeeze(3)?.detach();
+    let high = y.narrow(1, 1, t - 1)?.maximum(&y.narrow(1, 0, t - 1)?)?;
+    let weight = sigmoid(&((contact_height_m - high)? * 100.0)?)?;
+    let per_step = (weight * horizontal)?.mean(D::Minus1)?;
+    masked_frame_mean(&per_step, &step_mask(mask)?)
+}
+
+/// Mean squared depth (m^2) of foot points below y = 0.
+pub fn floor(pos: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    let depth = pos.narrow(3, 1, 1)?.squeeze(3)?.neg()?.relu()?;
+    masked_frame_mean(&depth.sqr()?.mean(D::Minus1)?, mask)
+}
+
+/// The logistic function, written out (candle-core has no sigmoid op; the
+/// term's weights are constants, so no gradient flows through it).
+fn sigmoid(x: &Tensor) -> Result<Tensor> {
+    Ok((x.neg()?.exp()? + 1.0)?.recip()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::{FeatureConfig, motion_to_frames};
+    use motion::glam::{DQuat, DVec3};
+    use motion::{Joint, Motion};
+    use std::sync::Arc;
+
+    /// A root, a thigh, a shin and a foot with a toe end site.
+    fn leg() -> Arc<Skeleton> {
+        let joint = |name: &str, parent, offset, end_site| Joint {
+            name: name.into(),
+            parent,
+            offset,
+            channels: vec![],
+            end_site,
+            limits: None,
+        };
+        Arc::new(
+            Skeleton::new(
+                vec![
+                    joint("root", None, DVec3::ZERO, None),
+                    joint("thigh", Some(0), DVec3::new(0.1, -0.1, 0.0), None),
+                    joint("shin", Some(1), DVec3::new(0.0, -0.4, 0.0), None),
+                    joint(
+                        "foot",
+                        Some(2),
+                        DVec3::new(0.0, -0.4, 0.0),
+                        Some(DVec3::new(0.0, -0.05, 0.15)),
+                    ),
+                    joint("arm", Some(0), DVec3::new(0.0, 0.5, 0.0), None),
+                ],
+                1.0,
+            )
+            .unwrap(),
+        )
+    }
+
+    fn random_motion(seed: u64) -> Motion {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let s = leg();
+        let frames = 4;
+        let mut q = || {
+            DQuat::from_euler(
+                motion::glam::EulerRot::YXZ,
+                rng.random_range(-2.0..2.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let rotations: Vec<DQuat> = (0..frames * s.len()).map(|_| q()).collect();
+        let root = (0..frames)
+            .map(|t| DVec3::new(0.1 * t as f64, 0.9, 0.05 * t as f64))
+            .collect();
+        Motion::new(s, 30.0, root, rotations).unwrap()
+    }
+
+    #[test]
+    fn foot_positions_match_the_skeletons_forward_kinematics() {
+        for seed in 0..5 {
+            let m = random_motion(seed);
+            // The features of the clip in its canonical placement, and the clip
+            // rebuilt from them: both describe the same world positions.
+            let config = FeatureConfig::default();
+            let frames = motion_to_frames(&m, &config);
+            let canonical = crate::features::frames_to_motion(m.skeleton(), 30.0, &frames).unwrap();
+            let fk = FootKinematics::new(m.skeleton()).unwrap();
+            assert_eq!(fk.points(), 2, "the foot joint and its toe end site");
+            let dim = frames.len() / m.frames();
+            let raw = Tensor::from_vec(frames, (1, m.frames(), dim), &Device::Cpu).unwrap();
+            let got = fk
+                .positions(&raw)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
+            for t in 0..m.frames() {
+                let x = canonical.world_transforms(t);
+                let foot = x[3].translation;
+                let toe = x[3].translation + x[3].rotation * DVec3::new(0.0, -0.05, 0.15);
+                for (k, p) in [foot, toe].iter().enumerate() {
+                    for (a, e) in got[(t * 2 + k) * 3..(t * 2 + k) * 3 + 3]
+                        .iter()
+                        .zip(p.to_array())
+                    {
+                        assert!(
+                            (*a as f64 - e).abs() < 1e-4,
+                            "seed {seed} t {t}: {a} vs {e}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn skating_counts_low_sliding_points_only() {
+        let dev = &Device::Cpu;
+        // One clip, three frames, two points: a low point sliding 1 cm per frame
+        // in x, a high point sliding the same.
+        let pos: Vec<f32> = (0..3)
+            .flat_map(|t| {
+                let x = 0.01 * t as f32;
+                [x, 0.0, 0.0, x, 0.5, 0.0]
+            })
+            .collect();
+        let pos = Tensor::from_vec(pos, (1, 3, 2, 3), dev).unwrap();
+        let mask = Tensor::ones((1, 3), candle_core::DType::F32, dev).unwrap();
+        let s = skating(&pos, &mask, 30.0, 0.05)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        // Low point: speed 0.3 m/s, weight ~1; high point weight ~0; mean over 2 points.
+        assert!((s - 0.09 / 2.0).abs() < 1e-3, "{s}");
+        let f = floor(&(pos - 0.1).unwrap(), &mask)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert!((f - 0.01 / 2.0).abs() < 1e-6, "{f}");
+    }
+}
