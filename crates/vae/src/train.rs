@@ -374,15 +374,20 @@ impl Trainer {
         self.gen_opt.step(&grads)?;
         let mut disc = 0.0;
         if self.config.adversarial {
-            let fake = xhat.detach();
+            // Real and fake clips in one batch: one pass of each discriminator
+            // (the sequence one is a BiLSTM, whose steps run one after another).
+            let both = Tensor::cat(&[&batch.x, &xhat.detach()], 0)?;
             let m = &batch.mask;
+            let m2 = Tensor::cat(&[m, m], 0)?;
+            let frame = vae.frame_disc.forward(&both)?;
+            let seq = vae.seq_disc.forward(&both, &m2)?;
             let d = (loss::hinge_discriminator(
-                &vae.frame_disc.forward(&batch.x)?,
-                &vae.frame_disc.forward(&fake)?,
+                &frame.narrow(0, 0, b)?,
+                &frame.narrow(0, b, b)?,
                 Some(m),
             )? + loss::hinge_discriminator(
-                &vae.seq_disc.forward(&batch.x, m)?,
-                &vae.seq_disc.forward(&fake, m)?,
+                &seq.narrow(0, 0, b)?,
+                &seq.narrow(0, b, b)?,
                 None,
             )?)?;
             disc = d.to_scalar::<f32>()?;
