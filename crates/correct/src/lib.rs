@@ -52,6 +52,19 @@
 //! need more root force than 0.1 m g, 1 skates; target 60 %). The VAE's
 //! samples are what limits the last: see issue 17's work on their skating.
 //!
+//! Session 10, VAE samples with foot terms, hip-height scaling and planted
+//! roots (`vae` crate README; recipe `[vae] copies = 10, iterations = 1500`,
+//! `[correct] policy = "class"`, `time_budget_s = 300`, `tracker_iterations =
+//! 150`, `max_iterations = 15`, `keep_rejected = true`; 31 min in all, two
+//! heavy processes on the 2 cores: VAE ~20 min, tracker 234 s, the 10
+//! corrections 0-23 s each): 5 of 10 accepted (target 60 %). Rejected: 1 fall
+//! (with reward, root force, skating and soles failing too), 2 on soles (72 %
+//! and 79 % of planted frames flat, one also root force 0.127), 2 only on
+//! skating against their own input: planting brought the inputs' skating to
+//! 0.017 and 0.024 m/s and the simulated feet slide 0.024 and 0.043 m/s, under
+//! the 0.1 cap but above the input, which the criterion forbids. Inputs now
+//! skate 0.017-0.148 m/s (before planting and the foot terms: ~0.44).
+//!
 //! Class totals (tracker + every clip): kick 889 s (31 s per clip), jog
 //! 837 s (49 s; its tracker began under the slower candle threading), hop
 //! 1233 s (34 s), squat 1136 s (22 s), sneak 314 s (21 s), deposit 816 s
