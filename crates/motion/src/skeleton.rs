@@ -353,6 +353,13 @@ impl Skeleton {
     /// Height of the rest pose (top of the highest joint or end site minus the
     /// lowest), metres. Used to guess units and to scale body models.
     pub fn rest_height(&self) -> f64 {
+        let (lo, hi) = self.rest_extent();
+        hi - lo
+    }
+
+    /// Lowest and highest height (y) of a joint or end site in the rest pose
+    /// with the root at the origin, metres.
+    pub fn rest_extent(&self) -> (f64, f64) {
         let positions = self.rest_positions();
         let mut lo = f64::INFINITY;
         let mut hi = f64::NEG_INFINITY;
@@ -366,7 +373,7 @@ impl Skeleton {
                 hi = hi.max(y);
             }
         }
-        hi - lo
+        (lo, hi)
     }
 }
 

@@ -132,17 +132,7 @@ pub fn clip_frames(motion: &Motion, config: &FeatureConfig) -> Result<Vec<f32>> 
 /// Height of the root above the lowest point (joint or end site) of the rest
 /// pose, metres: the leg length that sets how far a step carries the root.
 pub fn hip_height(skeleton: &Skeleton) -> f64 {
-    let n = skeleton.len();
-    let mut x = vec![motion::Transform::IDENTITY; n];
-    skeleton.forward(DVec3::ZERO, &vec![DQuat::IDENTITY; n], &mut x);
-    let mut lowest = 0.0f64;
-    for (j, t) in x.iter().enumerate() {
-        lowest = lowest.min(t.translation.y);
-        if let Some(e) = skeleton.joint(j).end_site {
-            lowest = lowest.min((t.translation + t.rotation * e).y);
-        }
-    }
-    -lowest
+    -skeleton.rest_extent().0.min(0.0)
 }
 
 /// The frames of a clip as the skeleton `model` would perform it: [`clip_frames`]
@@ -178,6 +168,11 @@ mod tests {
     use proptest::prelude::*;
 
     fn skeleton() -> Arc<Skeleton> {
+        two_joints(DVec3::new(0.0, 0.5, 0.0))
+    }
+
+    /// A root and one child joint at `child` from it.
+    fn two_joints(child: DVec3) -> Arc<Skeleton> {
         let joint = |name: &str, parent, offset| Joint {
             name: name.into(),
             parent,
@@ -188,10 +183,7 @@ mod tests {
         };
         Arc::new(
             Skeleton::new(
-                vec![
-                    joint("root", None, DVec3::ZERO),
-                    joint("a", Some(0), DVec3::new(0.0, 0.5, 0.0)),
-                ],
+                vec![joint("root", None, DVec3::ZERO), joint("a", Some(0), child)],
                 1.0,
             )
             .unwrap(),
@@ -252,28 +244,8 @@ mod tests {
 
     #[test]
     fn a_taller_actors_root_path_is_scaled_to_the_models_legs() {
-        // skeleton(): a root with one joint 0.5 m above it (no leg below the
-        // root), so give both skeletons a leg hanging down.
-        let leg = |length: f64| {
-            let joint = |name: &str, parent, offset| Joint {
-                name: name.into(),
-                parent,
-                offset,
-                channels: vec![],
-                end_site: None,
-                limits: None,
-            };
-            Arc::new(
-                Skeleton::new(
-                    vec![
-                        joint("root", None, DVec3::ZERO),
-                        joint("foot", Some(0), DVec3::new(0.0, -length, 0.0)),
-                    ],
-                    1.0,
-                )
-                .unwrap(),
-            )
-        };
+        // A leg hanging below the root, 0.8 m (the model) or 1 m (the actor).
+        let leg = |length: f64| two_joints(DVec3::new(0.0, -length, 0.0));
         let (short, tall) = (leg(0.8), leg(1.0));
         assert!((hip_height(&tall) - 1.0).abs() < 1e-12);
         let roots = vec![DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.5, 1.1, 0.2)];
