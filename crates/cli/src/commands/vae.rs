@@ -46,9 +46,14 @@ struct TrainArgs {
     iterations: Option<u64>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Train without the frame and sequence discriminators (ablation).
+    /// Train without the frame and sequence discriminators (ablation; lower
+    /// MMD on kick, jog and sneak, crates/vae/README.md).
     #[arg(long)]
     no_adversarial: bool,
+    /// Train without the foot terms (foot position / velocity, skating of
+    /// mixed codes, floor; an ablation).
+    #[arg(long)]
+    no_foot_terms: bool,
     /// The paper's sizes and optimiser (SGD lr 0.005 halved every 4000 of 20000
     /// iterations); slow on a CPU.
     #[arg(long)]
@@ -100,6 +105,9 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     };
     config.seed = args.seed;
     config.adversarial = !args.no_adversarial;
+    if args.no_foot_terms {
+        config.feet = ::vae::FootLoss::off();
+    }
     if let Some(lr) = args.lr {
         config.optimizer = match config.optimizer {
             OptimizerConfig::Sgd { halve_every, .. } => OptimizerConfig::Sgd { lr, halve_every },
@@ -120,20 +128,21 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         bail!("--iterations/--epochs must be at least 1");
     }
     eprintln!(
-        "training on {} clips ({} joints), {} iterations, adversarial {}",
+        "training on {} clips ({} joints), {} iterations, adversarial {}, foot terms {}",
         clips.len(),
         clips[0].joints(),
         config.iterations,
-        config.adversarial
+        config.adversarial,
+        !config.feet.is_off()
     );
     let log_every = args.log_every;
     let model = ::vae::train(&clips, &config, |p| {
         if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
             let l = p.losses;
             eprintln!(
-                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3}",
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5}",
                 p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
-                l.adversarial, l.discriminator
+                l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor
             );
         }
     })
