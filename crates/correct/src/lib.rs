@@ -65,6 +65,15 @@
 //! the 0.1 cap but above the input, which the criterion forbids. Inputs now
 //! skate 0.017-0.148 m/s (before planting and the foot terms: ~0.44).
 //!
+//! The same recipe on jog (17 clips; 19 min in all, VAE ~12 min): 0 of 10
+//! accepted, every sample falls (R_norm 0.22-0.64, root force 0.10-0.24 m g)
+//! although the class tracker accepts 17 of 17 jog originals (table above).
+//! The decoded jogs are kinematically tidier (skating 0.016-0.36 m/s before
+//! correction) but not dynamically trackable: their frames float more than
+//! the captures' (42-52 % vs 22 %, `vae` README) and their poses are 0.13 rad
+//! from the training clips on average. What limits VAE jog acceptance is the
+//! VAE's pose quality, not the tracker.
+//!
 //! Class totals (tracker + every clip): kick 889 s (31 s per clip), jog
 //! 837 s (49 s; its tracker began under the slower candle threading), hop
 //! 1233 s (34 s), squat 1136 s (22 s), sneak 314 s (21 s), deposit 816 s
