@@ -69,9 +69,9 @@
 //! accepted, every sample falls (R_norm 0.22-0.64, root force 0.10-0.24 m g)
 //! although the class tracker accepts 17 of 17 jog originals (table above).
 //! The decoded jogs are kinematically tidier (skating 0.016-0.36 m/s before
-//! correction) but not dynamically trackable: their frames float more than
-//! the captures' (42-52 % vs 22 %, `vae` README) and their poses are 0.13 rad
-//! from the training clips on average. What limits VAE jog acceptance is the
+//! correction) but not dynamically trackable: in `motionaug bench vae` (bd
+//! held out) jog samples' frames float more than the captures' (42-52 % vs
+//! 22 %) and reconstructions are 0.10-0.13 rad from the captured poses. What limits VAE jog acceptance is the
 //! VAE's pose quality, not the tracker.
 //!
 //! Class totals (tracker + every clip): kick 889 s (31 s per clip), jog
