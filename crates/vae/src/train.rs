@@ -1,10 +1,14 @@
 //! Training one VAE on the clips of one action class.
 //!
 //! Each iteration: encode a batch, draw z with the reparameterisation trick (noise
-//! from a seeded ChaCha RNG, so runs are reproducible), decode, and step the
-//! generator (encoder + decoder) on reconstruction + smoothness + KL (+ the
+//! from a seeded ChaCha RNG, so runs are reproducible), decode it together with
+//! as many codes mixed between two clips of the batch (when the foot terms are
+//! on), and step the generator (encoder + decoder) on reconstruction +
+//! smoothness + KL + the foot terms (`feet`: foot position and velocity of the
+//! reconstructions, skating of the mixed decodes, floor for both) (+ the
 //! adversarial hinge terms). With adversarial training the two discriminators then
-//! take one step on real clips vs the (detached) reconstructions.
+//! take one step on real clips vs the (detached) reconstructions, both in one
+//! batch. With Adam the rate follows a cosine down to `cosine_to` of itself.
 
 use std::time::Instant;
 
