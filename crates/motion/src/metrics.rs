@@ -192,6 +192,12 @@ pub struct FootContacts {
 
 /// [`FootContacts`] of `motion` with thresholds `th`.
 pub fn foot_contacts(motion: &Motion, th: &Thresholds) -> FootContacts {
+    sole_tracks(motion, th).1
+}
+
+/// The world positions of the sole points, `frames * points` (frame-major),
+/// and their [`FootContacts`].
+fn sole_tracks(motion: &Motion, th: &Thresholds) -> (Vec<DVec3>, FootContacts) {
     let feet = sole_points(motion, th);
     let mut x = vec![Transform::IDENTITY; motion.joints()];
     let mut foot_pos = Vec::with_capacity(motion.frames() * feet.len());
@@ -199,10 +205,11 @@ pub fn foot_contacts(motion: &Motion, th: &Thresholds) -> FootContacts {
         motion.world_transforms_into(t, &mut x);
         foot_pos.extend(feet.iter().map(|p| point(&x, *p)));
     }
-    FootContacts {
+    let contacts = FootContacts {
         points: feet.iter().map(|p| (p.0, p.1.is_some())).collect(),
         steps: contact_steps(&foot_pos, feet.len(), 1.0 / motion.fps(), th),
-    }
+    };
+    (foot_pos, contacts)
 }
 
 /// Metrics with the default thresholds.
@@ -307,24 +314,12 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
 /// metric and a physics tracker both see as sliding feet; when the legs step,
 /// the root follows them ("root from feet").
 pub fn plant_root(motion: &Motion, th: &Thresholds) -> Motion {
-    let contacts = foot_contacts(motion, th);
+    let (pos, contacts) = sole_tracks(motion, th);
     let np = contacts.points.len();
     let n = motion.frames();
     let mut out = motion.clone();
     if np == 0 || n < 2 {
         return out;
-    }
-    let s = motion.skeleton();
-    let points: Vec<(usize, Option<DVec3>)> = contacts
-        .points
-        .iter()
-        .map(|&(j, site)| (j, if site { s.joint(j).end_site } else { None }))
-        .collect();
-    let mut x = vec![Transform::IDENTITY; motion.joints()];
-    let mut pos = Vec::with_capacity(n * np);
-    for t in 0..n {
-        motion.world_transforms_into(t, &mut x);
-        pos.extend(points.iter().map(|p| point(&x, *p)));
     }
     let mut shift = DVec3::ZERO;
     let root = out.root_translation_mut();

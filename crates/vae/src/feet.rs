@@ -97,28 +97,31 @@ struct ChainJoint {
     joint: usize,
     /// Index into the chain of the parent, `None` for the root.
     parent: Option<usize>,
-    /// Offset from the parent in the parent's frame, metres.
-    offset: [f32; 3],
+    /// Offset from the parent in the parent's frame, metres, `(1, 1, 3)`.
+    offset: Tensor,
 }
 
 /// Forward kinematics of the foot points of one skeleton.
 pub struct FootKinematics {
     joints: usize,
     chain: Vec<ChainJoint>,
-    /// Chain index and end-site offset (`None`: the joint's own position).
-    points: Vec<(usize, Option<[f32; 3]>)>,
+    /// Chain index and end-site offset `(1, 1, 3)` (`None`: the joint's own
+    /// position).
+    points: Vec<(usize, Option<Tensor>)>,
 }
 
-fn f32x3(v: motion::glam::DVec3) -> [f32; 3] {
-    [v.x as f32, v.y as f32, v.z as f32]
+/// A constant offset as a `(1, 1, 3)` row vector, built once per skeleton.
+fn row(v: motion::glam::DVec3) -> Result<Tensor> {
+    let v = [v.x as f32, v.y as f32, v.z as f32];
+    Ok(Tensor::from_slice(&v, (1, 1, 3), &Device::Cpu)?)
 }
 
 impl FootKinematics {
     /// `None` when the skeleton has no foot points.
-    pub fn new(skeleton: &Skeleton) -> Option<Self> {
+    pub fn new(skeleton: &Skeleton) -> Result<Option<Self>> {
         let feet = motion::metrics::skeleton_foot_points(skeleton);
         if feet.is_empty() {
-            return None;
+            return Ok(None);
         }
         let mut on_chain = vec![false; skeleton.len()];
         for &(j, _) in &feet {
@@ -135,18 +138,18 @@ impl FootKinematics {
             chain.push(ChainJoint {
                 joint: j,
                 parent: skeleton.parent(j).map(|p| index[p]),
-                offset: f32x3(skeleton.joint(j).offset),
+                offset: row(skeleton.joint(j).offset)?,
             });
         }
         let points = feet
             .iter()
-            .map(|&(j, e)| (index[j], e.map(f32x3)))
-            .collect();
-        Some(FootKinematics {
+            .map(|&(j, e)| Ok((index[j], e.map(row).transpose()?)))
+            .collect::<Result<_>>()?;
+        Ok(Some(FootKinematics {
             joints: skeleton.len(),
             chain,
             points,
-        })
+        }))
     }
 
     pub fn points(&self) -> usize {
@@ -179,20 +182,16 @@ impl FootKinematics {
                     position.push(root.clone());
                 }
                 Some(p) => {
-                    let o = Tensor::from_slice(&c.offset, (1, 1, 3), &Device::Cpu)?;
-                    position.push((&position[p] + o.broadcast_matmul(&global[p])?)?);
+                    position.push((&position[p] + c.offset.broadcast_matmul(&global[p])?)?);
                     global.push(m.matmul(&global[p])?);
                 }
             }
         }
         let mut out = Vec::with_capacity(self.points.len());
-        for &(c, site) in &self.points {
+        for (c, site) in &self.points {
             out.push(match site {
-                None => position[c].clone(),
-                Some(e) => {
-                    let e = Tensor::from_slice(&e, (1, 1, 3), &Device::Cpu)?;
-                    (&position[c] + e.broadcast_matmul(&global[c])?)?
-                }
+                None => position[*c].clone(),
+                Some(e) => (&position[*c] + e.broadcast_matmul(&global[*c])?)?,
             });
         }
         Ok(Tensor::cat(&out, 1)?.reshape((b, t, self.points.len(), 3))?)
@@ -242,7 +241,7 @@ pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> 
     let horizontal = (v.narrow(3, 0, 1)?.sqr()? + v.narrow(3, 2, 1)?.sqr()?)?.squeeze(3)?;
     let y = pos.narrow(3, 1, 1)?.squeeze(3)?.detach();
     let high = y.narrow(1, 1, t - 1)?.maximum(&y.narrow(1, 0, t - 1)?)?;
-    let weight = sigmoid(&((contact_height_m - high)? * 100.0)?)?;
+    let weight = candle_nn::ops::sigmoid(&((contact_height_m - high)? * 100.0)?)?;
     let per_step = (weight * horizontal)?.mean(D::Minus1)?;
     masked_frame_mean(&per_step, &step_mask(mask)?)
 }
@@ -251,12 +250,6 @@ pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> 
 pub fn floor(pos: &Tensor, mask: &Tensor) -> Result<Tensor> {
     let depth = pos.narrow(3, 1, 1)?.squeeze(3)?.neg()?.relu()?;
     masked_frame_mean(&depth.sqr()?.mean(D::Minus1)?, mask)
-}
-
-/// The logistic function, written out (candle-core has no sigmoid op; the
-/// term's weights are constants, so no gradient flows through it).
-fn sigmoid(x: &Tensor) -> Result<Tensor> {
-    Ok((x.neg()?.exp()? + 1.0)?.recip()?)
 }
 
 #[cfg(test)]
@@ -326,7 +319,7 @@ mod tests {
             let config = FeatureConfig::default();
             let frames = motion_to_frames(&m, &config);
             let canonical = crate::features::frames_to_motion(m.skeleton(), 30.0, &frames).unwrap();
-            let fk = FootKinematics::new(m.skeleton()).unwrap();
+            let fk = FootKinematics::new(m.skeleton()).unwrap().unwrap();
             assert_eq!(fk.points(), 2, "the foot joint and its toe end site");
             let dim = frames.len() / m.frames();
             let raw = Tensor::from_vec(frames, (1, m.frames(), dim), &Device::Cpu).unwrap();

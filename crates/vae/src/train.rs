@@ -214,7 +214,7 @@ impl Trainer {
         let feet = if config.feet.is_off() {
             None
         } else {
-            FootKinematics::new(&data.skeleton)
+            FootKinematics::new(&data.skeleton)?
         };
         let full_batch = if data.len() <= config.batch_size {
             let all: Vec<usize> = (0..data.len()).collect();

@@ -128,6 +128,12 @@ impl TrainedVae {
         &self.skeleton
     }
 
+    /// A clip's raw frames as this model sees it (its rate, its skeleton's hip
+    /// height; `features::clip_frames_on`).
+    fn model_frames(&self, clip: &Motion) -> Result<Vec<f32>> {
+        clip_frames_on(clip, &self.meta.features, &self.skeleton)
+    }
+
     /// Posterior `(mu, logvar)` of each clip (resampled to the model's rate).
     pub fn encode(&self, clips: &[Motion]) -> Result<Posteriors> {
         let dim = self.vae.frame_dim;
@@ -141,10 +147,7 @@ impl TrainedVae {
                     self.skeleton.len()
                 )));
             }
-            let frames =
-                self.meta
-                    .stats
-                    .normalise(&clip_frames_on(c, &self.meta.features, &self.skeleton)?);
+            let frames = self.meta.stats.normalise(&self.model_frames(c)?);
             let t = frames.len() / dim;
             let x = Tensor::from_vec(frames, (1, t, dim), &Device::Cpu)?;
             let mask = Tensor::ones((1, t), candle_core::DType::F32, &Device::Cpu)?;
@@ -188,10 +191,7 @@ impl TrainedVae {
         let (mu, _) = self.encode(clips)?;
         let lengths: Vec<usize> = clips
             .iter()
-            .map(|c| {
-                clip_frames_on(c, &self.meta.features, &self.skeleton)
-                    .map(|f| f.len() / self.vae.frame_dim)
-            })
+            .map(|c| self.model_frames(c).map(|f| f.len() / self.vae.frame_dim))
             .collect::<Result<_>>()?;
         self.decode(&mu, &lengths)
     }
@@ -202,11 +202,7 @@ impl TrainedVae {
         let features = self.meta.features;
         let (mut root_sq, mut angle, mut frames, mut rotations) = (0.0, 0.0, 0usize, 0usize);
         for (c, r) in clips.iter().zip(&recon) {
-            let original = frames_to_motion(
-                &self.skeleton,
-                features.fps,
-                &clip_frames_on(c, &features, &self.skeleton)?,
-            )?;
+            let original = frames_to_motion(&self.skeleton, features.fps, &self.model_frames(c)?)?;
             for t in 0..original.frames() {
                 root_sq +=
                     (original.root_translation()[t] - r.root_translation()[t]).length_squared();

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use eval::scores::SetPlausibility;
 use motion::Motion;
 use serde::Serialize;
 
@@ -109,28 +110,6 @@ struct CurvePoint {
     iteration: u64,
     seconds: f64,
     losses: vae::Losses,
-}
-
-/// Means of the plausibility metrics over a set of clips.
-#[derive(Serialize, Clone, Copy)]
-struct SetPlausibility {
-    clips: usize,
-    foot_skating_m_s: f64,
-    penetration_mean_mm: f64,
-    floating_percent: f64,
-}
-
-fn plausibility(clips: &[Motion]) -> SetPlausibility {
-    let ps: Vec<_> = clips.iter().map(motion::metrics::plausibility).collect();
-    let mean = |f: &dyn Fn(&motion::metrics::Plausibility) -> f64| {
-        ps.iter().map(f).sum::<f64>() / ps.len().max(1) as f64
-    };
-    SetPlausibility {
-        clips: clips.len(),
-        foot_skating_m_s: mean(&|p| p.foot_skating_m_s),
-        penetration_mean_mm: mean(&|p| p.penetration_mean_m * 1000.0),
-        floating_percent: mean(&|p| p.floating_fraction * 100.0),
-    }
 }
 
 #[derive(Serialize)]
@@ -245,8 +224,9 @@ fn run_one(
     let test = feature(&mut split.test.iter().map(|(_, m)| m))?;
     let synth = feature(&mut samples.iter())?;
     let train = feature(&mut clips.iter())?;
-    let originals = plausibility(&clips);
-    let sampled = plausibility(&samples);
+    let originals = SetPlausibility::of(&clips);
+    let sampled = SetPlausibility::of(&samples);
+    let skating_ratio = sampled.foot_skating_m_s / originals.foot_skating_m_s.max(1e-9);
     Ok(Row {
         class: class.to_string(),
         variant,
@@ -260,10 +240,10 @@ fn run_one(
         reconstruction_root_rmse_m: error.root_rmse_m,
         reconstruction_joint_angle_rad: error.mean_joint_angle_rad,
         originals,
-        reconstructions: plausibility(&recon),
-        samples_decoded: plausibility(&decoded),
+        reconstructions: SetPlausibility::of(&recon),
+        samples_decoded: SetPlausibility::of(&decoded),
         samples: sampled,
-        skating_ratio: sampled.foot_skating_m_s / originals.foot_skating_m_s.max(1e-9),
+        skating_ratio,
         mmd2_samples_to_test: eval::mmd::mmd(&synth, &test).mmd2,
         mmd2_train_to_test: eval::mmd::mmd(&train, &test).mmd2,
     })
@@ -288,10 +268,10 @@ fn table(rows: &[Row]) -> String {
             r.samples_decoded.foot_skating_m_s,
             r.samples.foot_skating_m_s,
             r.skating_ratio,
-            r.originals.penetration_mean_mm,
-            r.samples.penetration_mean_mm,
-            r.originals.floating_percent,
-            r.samples.floating_percent,
+            r.originals.penetration_mean_m * 1000.0,
+            r.samples.penetration_mean_m * 1000.0,
+            r.originals.floating_fraction * 100.0,
+            r.samples.floating_fraction * 100.0,
             r.mmd2_samples_to_test,
             r.mmd2_train_to_test,
         );
