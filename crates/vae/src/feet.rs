@@ -18,7 +18,7 @@ use motion::Skeleton;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
-use crate::loss::{masked_frame_mean, rotation_matrices};
+use crate::loss::{check_weights, masked_frame_mean, rotation_matrices};
 
 /// Weights and thresholds of the foot terms (all 0: the plain VAE loss).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -69,18 +69,15 @@ impl FootLoss {
     }
 
     pub fn validate(&self) -> Result<()> {
-        for (name, v) in [
-            ("position", self.position),
-            ("velocity", self.velocity),
-            ("skating", self.skating),
-            ("floor", self.floor),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(VaeError::Config(format!(
-                    "foot loss weight {name} = {v}: must be a finite number >= 0"
-                )));
-            }
-        }
+        check_weights(
+            "foot loss weight",
+            &[
+                ("position", self.position),
+                ("velocity", self.velocity),
+                ("skating", self.skating),
+                ("floor", self.floor),
+            ],
+        )?;
         if !(self.contact_height_m.is_finite() && self.contact_height_m > 0.0) {
             return Err(VaeError::Config(format!(
                 "foot contact height {} m must be > 0",

@@ -39,19 +39,27 @@ impl Default for LossWeights {
 
 impl LossWeights {
     pub fn validate(&self) -> Result<()> {
-        for (name, v) in [
-            ("smooth", self.smooth),
-            ("kl", self.kl),
-            ("adversarial", self.adversarial),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(VaeError::Config(format!(
-                    "loss weight {name} = {v}: must be a finite number >= 0"
-                )));
-            }
-        }
-        Ok(())
+        check_weights(
+            "loss weight",
+            &[
+                ("smooth", self.smooth),
+                ("kl", self.kl),
+                ("adversarial", self.adversarial),
+            ],
+        )
     }
+}
+
+/// Every weight a finite number >= 0; `what` names them in the error.
+pub(crate) fn check_weights(what: &str, weights: &[(&str, f64)]) -> Result<()> {
+    for &(name, v) in weights {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(VaeError::Config(format!(
+                "{what} {name} = {v}: must be a finite number >= 0"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Normalisation statistics as broadcastable tensors.
