@@ -359,8 +359,11 @@ export class Player {
     this.last = now;
     let buffering = false;
     if (this.playing && this.tracks.length) {
+      // Loops: past the end, playback carries on from the start by the
+      // time it overshot (not from 0, which would stall a frame).
+      const duration = this.duration();
       let next = this.time + dt * this.speed;
-      if (next > this.duration()) next = 0;
+      if (next > duration) next = duration > 0 ? next % duration : 0;
       if (this.available(next)) {
         this.time = next;
       } else {
