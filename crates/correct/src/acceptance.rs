@@ -190,7 +190,12 @@ pub fn input_soles(
     physics: &physics::Config,
     config: &AcceptanceConfig,
 ) -> Result<SoleStats, CorrectError> {
-    let env = physics::ImitationEnv::new(motion, physics)?;
+    // The clip as given, not the planted reference the character imitates.
+    let physics = physics::Config {
+        plant_reference: false,
+        ..physics.clone()
+    };
+    let env = physics::ImitationEnv::new(motion, &physics)?;
     Ok(SoleStats::of(
         &env.reference_foot_contacts(config.sole_tolerance_m as f32),
         config,

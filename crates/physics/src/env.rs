@@ -102,6 +102,17 @@ pub struct Config {
     /// `(v / skate_scale_m_s)^2` to the exponent, so planted feet learn to stay put
     /// (acceptance judges foot skating).
     pub skate_scale_m_s: f32,
+    /// Imitate the clip with its root path re-integrated from its planted
+    /// feet (`motion::metrics::plant_root`): where the capture's feet slide
+    /// while they stand, the root keeps still instead. Flight, heights and
+    /// every joint rotation are unchanged; acceptance still compares the
+    /// output with the clip as given. Off by default: measured on HDM05 hop
+    /// and squat (class trackers, `motionaug bench correction
+    /// --raw-reference` against without, 2026-12-03) it accepted no more
+    /// clips (hop 30 vs 31 of 36, squat 17 vs 19 of the first 24), and the bd
+    /// squats whose inputs skate 0.28-0.44 m/s still skated 0.11-0.21 m/s
+    /// after correction. See the `correct` crate's docs.
+    pub plant_reference: bool,
     /// Recompute the PD-residual force at every physics step instead of once
     /// per control step (the reference computes it once per policy step).
     pub residual_every_substep: bool,
@@ -140,6 +151,7 @@ impl Default for Config {
             sole_reward_weight: 0.2,
             sole_scale_m: 0.02,
             skate_scale_m_s: 0.0,
+            plant_reference: false,
             residual_every_substep: false,
             output_frame: OutputFrame::Ground,
             tracker_frames: 0,
@@ -319,6 +331,13 @@ impl ImitationEnv {
         }
         let mut sim_params = config.sim;
         sim_params.friction = config.character.friction;
+        let planted;
+        let motion = if config.plant_reference {
+            planted = motion::metrics::plant_root(motion, &Default::default());
+            &planted
+        } else {
+            motion
+        };
         let reference = Reference::new(motion, &spec, config.control_hz);
         let sim = Sim::new(&spec, sim_params);
         let n = spec.bodies.len();
@@ -983,5 +1002,31 @@ mod tests {
             angvel: Vec3::ZERO,
         };
         assert_eq!(sole_point_speed(&resting, [heel, toe]), 0.0);
+    }
+
+    /// A standing clip whose root (and so its feet) slides 0.5 m/s: the
+    /// planted reference stands where it started; the raw one slides on.
+    #[test]
+    fn a_planted_reference_does_not_slide_with_the_capture() {
+        let sk = crate::fixtures::cmu_humanoid();
+        let mut clip = crate::fixtures::sway(sk, 1.0, 30.0);
+        for (f, p) in clip.root_translation_mut().iter_mut().enumerate() {
+            p.z += 0.5 * f as f64 / 30.0;
+        }
+        let slid = |plant_reference| {
+            let config = Config {
+                plant_reference,
+                ..Config::default()
+            };
+            let env = ImitationEnv::new(&clip, &config).unwrap();
+            let frames = &env.reference().frames;
+            frames[frames.len() - 1].root.z - frames[0].root.z
+        };
+        let (planted, raw) = (slid(true), slid(false));
+        assert!(planted.abs() < 0.02, "planted reference slid {planted} m");
+        assert!(
+            (raw - 0.5 * 29.0 / 30.0).abs() < 0.02,
+            "raw reference slid {raw} m"
+        );
     }
 }

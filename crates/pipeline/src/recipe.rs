@@ -24,6 +24,7 @@
 //! time_budget_s = 300
 //! max_iterations = 15       # PPO iterations per clip at most (optional)
 //! residual = "pd"           # pd | none | learned
+//! plant_reference = false   # imitate the root re-integrated from the planted feet
 //! keep_rejected = false     # keep clips that fail acceptance (marked in the manifest)
 //! accept_threshold = 0.7    # acceptance (correct::acceptance): mean reward at least,
 //! max_residual_force_ratio = 0.1  # root force / body weight at most,
@@ -137,6 +138,10 @@ pub struct CorrectStep {
     /// judges the tracker as is.
     pub max_iterations: Option<u64>,
     pub residual: ResidualKind,
+    /// Imitate each clip with its root re-integrated from its planted feet
+    /// (`physics::Config::plant_reference`); acceptance still compares the
+    /// output with the clip as given.
+    pub plant_reference: bool,
     /// Stop a clip's training once its rollout reaches this R_norm (and is accepted).
     pub target_r_norm: f64,
     /// Mean per-step reward a corrected clip needs to be kept (paper: 0.7).
@@ -204,6 +209,7 @@ impl Default for CorrectStep {
             time_budget_s: c.time_budget_s,
             max_iterations: None,
             residual: ResidualKind::Pd,
+            plant_reference: c.physics.plant_reference,
             target_r_norm: c.target_r_norm.unwrap_or(0.8),
             accept_threshold: c.acceptance.min_mean_reward,
             max_residual_force_ratio: c.acceptance.max_residual_force_ratio,
@@ -244,6 +250,7 @@ impl CorrectStep {
             ..correct::CorrectConfig::default()
         };
         c.physics.residual = self.residual.physics();
+        c.physics.plant_reference = self.plant_reference;
         c
     }
 

@@ -47,6 +47,7 @@ fn recipes_are_validated_with_the_table_and_field_named() {
         [correct]
         time_budget_s = 30
         residual = "none"
+        plant_reference = true
         [debias]
         iterations = 10
         "#,
@@ -58,6 +59,11 @@ fn recipes_are_validated_with_the_table_and_field_named() {
         full.correct.as_ref().map(|c| c.residual),
         Some(pipeline::ResidualKind::None)
     );
+    // The recipe's choices reach the correction jobs and the class tracker.
+    let correct = full.correct.as_ref().expect("[correct]");
+    assert!(correct.config(0).physics.plant_reference);
+    assert!(correct.tracker_config(0).correct.physics.plant_reference);
+    assert!(!pipeline::CorrectStep::default().config(0).physics.plant_reference);
     // JSON with the same structure is the same recipe.
     let json = Recipe::from_value(full.to_value()).expect("round trip");
     assert_eq!(json, full);

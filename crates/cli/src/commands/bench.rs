@@ -165,6 +165,10 @@ struct CorrectionArgs {
     /// Speed scale of the sole reward's sliding term, m/s (0 = off).
     #[arg(long, default_value_t = correct::CorrectConfig::default().physics.skate_scale_m_s)]
     skate_scale: f32,
+    /// Imitate each clip's root re-integrated from its planted feet
+    /// (`physics::Config::plant_reference`) instead of as captured.
+    #[arg(long)]
+    plant_reference: bool,
     /// Train one tracker policy per class on this many of its clips (spread
     /// over the class) first, and start every clip's correction from it
     /// (`correct::class`); 0 = one policy per clip from scratch.
@@ -198,6 +202,7 @@ fn base_config(args: &CorrectionArgs) -> correct::CorrectConfig {
     config.physics.character.calibrate_feet = !args.rest_feet;
     config.physics.sole_reward_weight = args.sole_reward_weight;
     config.physics.skate_scale_m_s = args.skate_scale;
+    config.physics.plant_reference = args.plant_reference;
     config.residual_schedule = correct::ResidualSchedule {
         start_scale: 1.0,
         final_scale: args.residual_final_scale,

@@ -74,6 +74,10 @@ pub struct Args {
     /// whose floor is not y = 0.
     #[arg(long)]
     keep_clip_height: bool,
+    /// Imitate the root re-integrated from the planted feet instead of as
+    /// captured (acceptance compares with the clip as given either way).
+    #[arg(long)]
+    plant_reference: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -98,6 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.physics.skate_scale_m_s = args.skate_scale;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = !args.rest_feet;
+    config.physics.plant_reference = args.plant_reference;
     if args.keep_clip_height {
         config.physics.output_frame = physics::OutputFrame::Clip;
     }
