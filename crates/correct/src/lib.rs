@@ -76,7 +76,8 @@
 //! iterations): 12 of 32 clips rejected, 7 by falls and 13 with soles off
 //! the floor (82-89 % of planted frames flat). The same tracker resumed to
 //! 300 iterations (`--tracker-iterations 300`, its 150-iteration checkpoint
-//! resumed, one core while a build used the other) passes 8 of 10, and
+//! resumed, one core while a build used the other; 1253 s in all) passes 6
+//! of its 10 clips at 300 (8 at 295), and
 //! then 25 of 32 deposits are accepted (78 %; 6 falls), 20 s per clip
 //! (641 s for the 32), residual 0.033 m g, skating 0.093 -> 0.042 m/s,
 //! soles flat 83 -> 89 %: the class of 525 at about 1.8 h. A longer tracker
