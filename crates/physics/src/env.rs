@@ -108,7 +108,7 @@ pub struct Config {
     /// every joint rotation are unchanged; acceptance still compares the
     /// output with the clip as given. Off by default: measured on HDM05 hop
     /// and squat (class trackers, `motionaug bench correction
-    /// --raw-reference` against without, 2026-12-03) it accepted no more
+    /// --plant-reference` against without, 2026-12-03) it accepted no more
     /// clips (hop 30 vs 31 of 36, squat 17 vs 19 of the first 24), and the bd
     /// squats whose inputs skate 0.28-0.44 m/s still skated 0.11-0.21 m/s
     /// after correction. See the `correct` crate's docs.

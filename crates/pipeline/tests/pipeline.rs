@@ -63,7 +63,12 @@ fn recipes_are_validated_with_the_table_and_field_named() {
     let correct = full.correct.as_ref().expect("[correct]");
     assert!(correct.config(0).physics.plant_reference);
     assert!(correct.tracker_config(0).correct.physics.plant_reference);
-    assert!(!pipeline::CorrectStep::default().config(0).physics.plant_reference);
+    assert!(
+        !pipeline::CorrectStep::default()
+            .config(0)
+            .physics
+            .plant_reference
+    );
     // JSON with the same structure is the same recipe.
     let json = Recipe::from_value(full.to_value()).expect("round trip");
     assert_eq!(json, full);
