@@ -593,7 +593,7 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
         "--models",
         "gcn",
         "--sets",
-        "vae,physics",
+        "ik,vae,vae_ik,physics",
         "--vae-iterations",
         "2",
         "--correct-count",
@@ -623,40 +623,63 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     let cell = &first["cells"][0];
     let physics = &cell["physics"];
     assert_eq!(physics["originals"], 2, "{physics}");
-    assert_eq!(physics["samples"], 2, "{physics}");
+    // Two VAE samples and two IK edits.
+    assert_eq!(physics["samples"], 4, "{physics}");
+    assert_eq!(physics["by_set"]["vae"]["samples"], 2, "{physics}");
+    assert_eq!(physics["by_set"]["ik"]["samples"], 2, "{physics}");
     // One PPO iteration (4096 samples) at most per clip.
     assert!(
-        physics["ppo_samples"].as_u64().unwrap() <= 4 * 4096,
+        physics["ppo_samples"].as_u64().unwrap() <= 6 * 4096,
         "{physics}"
     );
-    assert_eq!(cell["synth_clips"]["vae_sub"], 2);
+    let clips = &cell["synth_clips"];
+    assert_eq!(clips["vae_sub"], 2);
+    assert_eq!(clips["ik_sub"], 2);
+    // VAE & IK: both sets together, time-warped, as made and corrected.
+    assert_eq!(
+        clips["vae_ik"].as_u64(),
+        Some(clips["vae_near"].as_u64().unwrap() + clips["ik"].as_u64().unwrap())
+    );
+    assert_eq!(clips["vae_ik_sub"], 4);
     let accepted = physics["samples_accepted"].as_u64().unwrap();
-    assert_eq!(cell["synth_clips"]["vae_corrected"], accepted);
+    let by_set = |set: &str| physics["by_set"][set]["samples_accepted"].as_u64().unwrap();
+    assert_eq!(by_set("vae") + by_set("ik"), accepted);
+    assert_eq!(clips["vae_corrected"].as_u64(), Some(by_set("vae")));
+    assert_eq!(clips["ik_corrected"].as_u64(), Some(by_set("ik")));
+    assert_eq!(clips["vae_ik_corrected"].as_u64(), Some(accepted));
     // The debiaser learns from the accepted originals only; without one there
     // is no debiased set (one PPO iteration rarely gets an original accepted).
     let pairs = physics["debias_pairs"].as_u64().unwrap();
     assert_eq!(physics["originals_accepted"].as_u64(), Some(pairs));
     let debiased = if pairs > 0 { accepted } else { 0 };
-    assert_eq!(cell["synth_clips"]["vae_debiased"], debiased);
-    for set in ["vae_near", "vae_sub"] {
+    assert_eq!(clips["vae_ik_debiased"].as_u64(), Some(debiased));
+    for set in ["vae_near", "vae_sub", "vae_ik", "ik_sub"] {
         let p = &cell["synth"][set]["plausibility"];
         assert!(p["foot_skating_m_s"].as_f64().unwrap() >= 0.0, "{set}: {p}");
         assert!(
             cell["predict"]["gcn"][set]["errors"]["400"]
                 .as_f64()
                 .unwrap()
-                > 0.0
+                > 0.0,
+            "{set}"
         );
     }
     let md = std::fs::read_to_string(out.join("table.md")).unwrap();
     assert!(
-        md.contains("| vae_sub |") && md.contains("## Correction"),
+        md.contains("| vae_sub |") && md.contains("| vae_ik_sub |") && md.contains("## Correction"),
         "{md}"
     );
-    // Corrections and the VAE are kept in OUT/work: a rerun reuses them and
-    // gives the same sets.
+    // A rerun reuses the finished cell ...
+    let rerun = motionaug(&args);
+    let stderr = String::from_utf8_lossy(&rerun.stderr).to_string();
+    ok(rerun);
+    assert!(stderr.contains("reusing the finished cell"), "{stderr}");
+    assert_eq!(read()["cells"], first["cells"]);
+    // ... and without it, the VAE and the corrections kept in OUT/work: the
+    // same sets.
     assert!(out.join("work/bk_sneak/samples").is_dir());
     assert!(out.join("work/bk_sneak/vae-2it/model.json").is_file());
+    std::fs::remove_dir_all(out.join("work/cells")).unwrap();
     let rerun = motionaug(&args);
     let stderr = String::from_utf8_lossy(&rerun.stderr).to_string();
     ok(rerun);
@@ -667,9 +690,65 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
         second["cells"][0]["physics"]["ppo_samples"],
         physics["ppo_samples"]
     );
-    // The physics set needs the VAE's samples.
-    let mut no_vae = args.to_vec();
-    no_vae[11] = "physics";
-    let err = failed(motionaug(&no_vae));
-    assert!(err.contains("add vae to --sets"), "{err}");
+    // The physics set needs something to correct.
+    let mut nothing = args.to_vec();
+    nothing[11] = "noise,physics";
+    let err = failed(motionaug(&nothing));
+    assert!(err.contains("add vae or ik to --sets"), "{err}");
+}
+
+#[test]
+fn eval_table_corrects_with_one_class_tracker() {
+    if !root().join(HDM05).is_dir() {
+        eprintln!("note: {HDM05} is absent; skipping the eval table test");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("table");
+    let output = motionaug(&[
+        "eval",
+        "table",
+        "--data",
+        HDM05,
+        "--classes",
+        "sneak",
+        "--test-actors",
+        "bk",
+        "--no-predict",
+        "--sets",
+        "vae,physics",
+        "--vae-iterations",
+        "2",
+        "--correct-count",
+        "2",
+        "--correct-originals",
+        "2",
+        "--correct-policy",
+        "class",
+        "--tracker-iterations",
+        "1",
+        "--clip-iterations",
+        "1",
+        "--debias-iterations",
+        "20",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+    ok(output);
+    assert!(
+        stderr.contains("class tracker: training on 2 originals"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("class tracker: trained"), "{stderr}");
+    assert!(
+        stderr.contains("every sample starts from the class tracker"),
+        "{stderr}"
+    );
+    assert!(out.join("work/bk_sneak/trackers/class").is_dir());
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("table.json")).unwrap()).unwrap();
+    let physics = &v["cells"][0]["physics"];
+    assert_eq!(physics["samples"], 2, "{physics}");
+    assert_eq!(v["config"]["physics"]["policy"], "class");
 }

@@ -15,7 +15,7 @@
 //!   ([`MinDtw::test_to_synth`]).
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::euler::{EulerClip, joint_sum_distance};
 
@@ -58,7 +58,7 @@ pub fn dtw(a: &EulerClip, b: &EulerClip) -> f64 {
 }
 
 /// Minimum DTW distances between a synthesised set and a test set.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MinDtw {
     /// Mean over synthesised clips of the distance to the closest test clip.
     pub synth_to_test: f64,

@@ -26,8 +26,10 @@ pub enum EvalError {
     Augmentation(Box<dyn std::error::Error + Send + Sync>),
     #[error("the augmentation pipeline failed: {0}")]
     Pipeline(#[from] pipeline::PipelineError),
-    /// The table's physics set corrects the VAE's samples.
-    #[error("invalid configuration: the physics set corrects the VAE's samples: add the vae set")]
+    /// The table's physics set corrects the VAE's samples and the IK edits.
+    #[error(
+        "invalid configuration: the physics set corrects the VAE's samples and the IK edits: add the vae or the ik set"
+    )]
     PhysicsNeedsVae,
     #[error("physical correction failed: {0}")]
     Correction(String),

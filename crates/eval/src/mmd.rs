@@ -16,7 +16,7 @@
 //!   negative, at most 2.
 
 use motion::Motion;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 use crate::euler::EulerClip;
@@ -54,7 +54,7 @@ fn pair_distances(a: &[Vec<f64>]) -> Vec<f64> {
 }
 
 /// MMD^2 and the kernel bandwidth it used.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Mmd {
     pub mmd2: f64,
     pub bandwidth: f64,

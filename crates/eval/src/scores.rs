@@ -4,7 +4,7 @@
 
 use motion::Motion;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::dataset;
 use crate::dtw::{self, MinDtw};
@@ -13,7 +13,7 @@ use crate::euler::{self, EulerClip};
 use crate::mmd::{self, Mmd};
 
 /// Closeness of a synthesised set to the test clips.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SynthScores {
     pub min_dtw: MinDtw,
     pub mmd: Mmd,
@@ -22,7 +22,7 @@ pub struct SynthScores {
 
 /// Physical plausibility of a set: means over its clips of
 /// `motion::metrics::plausibility` (default thresholds, clips at 30 fps).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SetPlausibility {
     pub foot_skating_m_s: f64,
     pub penetration_mean_m: f64,

@@ -553,10 +553,13 @@ impl Plan {
 }
 
 /// The correction part of a plan for clips made elsewhere (the evaluation
-/// table's VAE samples): correct every clip of `originals`, then each clip of
-/// `clips` warm-started from the best corrected original, then with `debias`
-/// train the debiasing network on the accepted originals and apply it to the
-/// accepted corrected clips. `seed_of` gives each correction's seed.
+/// table's VAE samples and IK edits): correct every clip of `originals`, then
+/// each clip of `clips` warm-started from the best corrected original, then
+/// with `debias` train the debiasing network on the accepted originals and
+/// apply it to the accepted corrected clips. With `policy = "class"` one
+/// tracker (group `class`) is trained on the originals first and every
+/// correction starts from it instead. `seed_of` gives each job's seed (the
+/// tracker's is `seed_of("tracker")`).
 pub fn corrections(
     originals: &[String],
     clips: &[String],
@@ -564,33 +567,55 @@ pub fn corrections(
     debias: Option<&debias::TrainConfig>,
     seed_of: impl Fn(&str) -> u64,
 ) -> Plan {
-    let mut jobs: Vec<PlannedJob> = originals
+    let tracker = (step.policy == PolicyKind::Class).then(|| "class".to_string());
+    let tracker_deps: Vec<String> = tracker.iter().map(|g| tracker_key(g)).collect();
+    let mut jobs: Vec<PlannedJob> = tracker
         .iter()
-        .map(|clip| PlannedJob {
-            key: format!("correct_original:{clip}"),
-            kind: JobKind::CorrectOriginal {
-                clip: clip.clone(),
-                seed: seed_of(clip),
+        .map(|group| PlannedJob {
+            key: tracker_key(group),
+            kind: JobKind::Tracker {
+                group: group.clone(),
+                clips: originals.to_vec(),
+                seed: seed_of("tracker"),
                 step: step.clone(),
-                tracker: None,
             },
             deps: vec![],
             outputs: vec![],
             finishes: false,
         })
         .collect();
-    let original_keys: Vec<String> = jobs.iter().map(|j| j.key.clone()).collect();
+    let mut original_keys = Vec::new();
+    for clip in originals {
+        let key = format!("correct_original:{clip}");
+        original_keys.push(key.clone());
+        jobs.push(PlannedJob {
+            key,
+            kind: JobKind::CorrectOriginal {
+                clip: clip.clone(),
+                seed: seed_of(clip),
+                step: step.clone(),
+                tracker: tracker.clone(),
+            },
+            deps: tracker_deps.clone(),
+            outputs: vec![],
+            finishes: false,
+        });
+    }
     for clip in clips {
+        let (sources, deps) = match &tracker {
+            Some(_) => (vec![], tracker_deps.clone()),
+            None => (originals.to_vec(), original_keys.clone()),
+        };
         jobs.push(PlannedJob {
             key: format!("correct:{clip}"),
             kind: JobKind::Correct {
                 clip: clip.clone(),
-                tracker: None,
-                sources: originals.to_vec(),
+                tracker: tracker.clone(),
+                sources,
                 seed: seed_of(clip),
                 step: step.clone(),
             },
-            deps: original_keys.clone(),
+            deps,
             outputs: vec![clip.clone()],
             finishes: false,
         });
@@ -603,4 +628,58 @@ pub fn corrections(
         jobs.extend(debias_jobs(originals, config, corrected));
     }
     Plan::finished(jobs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(n: &[&str]) -> Vec<String> {
+        n.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn corrections_start_from_the_originals_or_from_one_class_tracker() {
+        let (originals, clips) = (names(&["a", "b"]), names(&["s1", "s2"]));
+        let debias = debias::TrainConfig::default();
+        let deps = |plan: &Plan, key: &str| plan.job(key).map(|j| j.deps.clone());
+
+        let clip = CorrectStep::default();
+        let plan = corrections(&originals, &clips, &clip, Some(&debias), |_| 0);
+        assert!(plan.job("tracker:class").is_none());
+        assert_eq!(
+            deps(&plan, "correct:s1"),
+            Some(names(&["correct_original:a", "correct_original:b"]))
+        );
+        assert_eq!(deps(&plan, "correct_original:a"), Some(vec![]));
+
+        let class = CorrectStep {
+            policy: PolicyKind::Class,
+            ..CorrectStep::default()
+        };
+        let plan = corrections(&originals, &clips, &class, Some(&debias), |n| {
+            if n == "tracker" { 7 } else { 0 }
+        });
+        match plan.job("tracker:class").map(|j| &j.kind) {
+            Some(JobKind::Tracker { clips, seed, .. }) => {
+                assert_eq!(clips, &originals);
+                assert_eq!(*seed, 7);
+            }
+            other => panic!("no class tracker: {other:?}"),
+        }
+        for key in ["correct:s1", "correct_original:b"] {
+            assert_eq!(deps(&plan, key), Some(names(&["tracker:class"])), "{key}");
+        }
+        match plan.job("correct:s2").map(|j| &j.kind) {
+            Some(JobKind::Correct {
+                tracker, sources, ..
+            }) => {
+                assert_eq!(tracker.as_deref(), Some("class"));
+                assert!(sources.is_empty());
+            }
+            other => panic!("no correction of s2: {other:?}"),
+        }
+        // The debiaser still learns from the corrected originals.
+        assert!(plan.job("debias_train").is_some());
+    }
 }

@@ -448,7 +448,8 @@ fn run_predict(args: PredictArgs) -> anyhow::Result<()> {
 /// [`PhysicsConfig::default`]).
 #[derive(clap::Args, Clone, Debug)]
 struct PhysicsArgs {
-    /// VAE near samples corrected per class and fold (default: 2 per training clip).
+    /// Clips corrected per synthesised set (VAE near samples, IK edits), class
+    /// and fold (default: 2 per training clip).
     #[arg(long)]
     correct_count: Option<usize>,
     /// Training clips corrected for the debiasing network (default: all).
@@ -464,6 +465,28 @@ struct PhysicsArgs {
     /// Debiasing network optimiser steps.
     #[arg(long, default_value_t = PhysicsConfig::default().debias_iterations)]
     debias_iterations: usize,
+    /// `clip`: a policy per clip, warm-started from the best corrected
+    /// original, bounded by --correct-samples; `class`: one tracker per class
+    /// and fold trained on the originals, each clip judged with it and
+    /// fine-tuned for at most --clip-iterations when it fails.
+    #[arg(long, value_enum, default_value = "clip")]
+    correct_policy: CorrectPolicy,
+    /// PPO iterations of the class tracker at most (--correct-policy class).
+    #[arg(long, default_value_t = PhysicsConfig::default().tracker_iterations)]
+    tracker_iterations: u64,
+    /// Wall-time cap of the class tracker, seconds (--correct-policy class).
+    #[arg(long, default_value_t = PhysicsConfig::default().tracker_budget_s)]
+    tracker_budget_s: f64,
+    /// PPO iterations of a clip's fine-tuning at most (--correct-policy class).
+    #[arg(long, default_value_t = PhysicsConfig::default().clip_iterations)]
+    clip_iterations: u64,
+}
+
+/// The table's correction policy, as the CLI spells it.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum CorrectPolicy {
+    Clip,
+    Class,
 }
 
 #[derive(clap::Args)]
@@ -498,9 +521,10 @@ struct TableArgs {
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
-    /// Synthesised sets: noise, ik, vae (near and prior samples), physics (a
-    /// subset of the VAE's near samples as sampled, physically corrected, and
-    /// debiased; needs vae).
+    /// Synthesised sets: noise, ik, vae (near and prior samples), vae_ik (the
+    /// VAE's near samples and the IK edits together, time-warped +-10 %; needs
+    /// vae and ik), physics (subsets of the VAE's near samples and of the IK
+    /// edits as made, physically corrected, and debiased; needs vae or ik).
     #[arg(long, value_delimiter = ',', default_value = listed(&TableConfig::default().sets))]
     sets: Vec<SetKind>,
     #[command(flatten)]
@@ -533,6 +557,13 @@ impl TableArgs {
                 correct_samples: p.correct_samples,
                 correct_budget_s: p.correct_budget_s,
                 debias_iterations: p.debias_iterations,
+                policy: match p.correct_policy {
+                    CorrectPolicy::Clip => pipeline::PolicyKind::Clip,
+                    CorrectPolicy::Class => pipeline::PolicyKind::Class,
+                },
+                tracker_iterations: p.tracker_iterations,
+                tracker_budget_s: p.tracker_budget_s,
+                clip_iterations: p.clip_iterations,
             },
         }
     }
@@ -558,7 +589,9 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
     let config = args.config();
     match config.validate() {
         Err(::eval::EvalError::PhysicsNeedsVae) => {
-            bail!("--sets physics corrects the VAE's samples: add vae to --sets")
+            bail!(
+                "--sets physics corrects the VAE's samples and the IK edits: add vae or ik to --sets"
+            )
         }
         other => other?,
     }

@@ -189,7 +189,7 @@ impl ProtocolConfig {
 pub type Horizons = BTreeMap<String, f64>;
 
 /// The scores of one training set.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ConditionResult {
     /// Mean over seeds.
     pub errors: Horizons,

@@ -42,17 +42,30 @@ pub enum SetKind {
     Ik,
     /// VAE near and prior samples (10 per training clip).
     Vae,
-    /// A subset of the VAE's near samples as sampled, physically corrected
-    /// and debiased (needs [`SetKind::Vae`]).
+    /// VAE & IK: the VAE's near samples and the IK edits together, each clip
+    /// time-warped (+-10 %, MotionAug Sec. 4.3; needs both).
+    VaeIk,
+    /// Subsets of the VAE's near samples and of the IK edits as made,
+    /// physically corrected, and debiased (needs [`SetKind::Vae`] or
+    /// [`SetKind::Ik`]); with [`SetKind::VaeIk`] also their time-warped union.
     Physics,
 }
 
 impl SetKind {
+    pub const ALL: [SetKind; 5] = [
+        SetKind::Noise,
+        SetKind::Ik,
+        SetKind::Vae,
+        SetKind::VaeIk,
+        SetKind::Physics,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             SetKind::Noise => "noise",
             SetKind::Ik => "ik",
             SetKind::Vae => "vae",
+            SetKind::VaeIk => "vae_ik",
             SetKind::Physics => "physics",
         }
     }
@@ -61,10 +74,10 @@ impl SetKind {
 impl std::str::FromStr for SetKind {
     type Err = String;
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        [SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::Physics]
+        SetKind::ALL
             .into_iter()
             .find(|k| k.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown set `{s}` (noise, ik, vae or physics)"))
+            .ok_or_else(|| format!("unknown set `{s}` (noise, ik, vae, vae_ik or physics)"))
     }
 }
 
@@ -74,14 +87,23 @@ impl std::fmt::Display for SetKind {
     }
 }
 
-/// Conditions of the prediction tables, in order (sets not made are skipped).
-pub const PREDICT_CONDITIONS: [&str; 6] = [
+/// Conditions of the prediction tables, in order (sets not made are skipped):
+/// the synthesised sets as made, then the corrected subsets as made
+/// (`_sub`), physically corrected (`_corrected`) and debiased (`_debiased`).
+pub const PREDICT_CONDITIONS: [&str; 13] = [
     "noise",
     "ik",
     "vae_near",
+    "vae_ik",
+    "ik_sub",
+    "ik_corrected",
+    "ik_debiased",
     "vae_sub",
     "vae_corrected",
     "vae_debiased",
+    "vae_ik_sub",
+    "vae_ik_corrected",
+    "vae_ik_debiased",
 ];
 
 /// What the table computes.
@@ -127,7 +149,7 @@ impl Default for TableConfig {
             vae_iterations: 300,
             vae_ablation: false,
             predict: true,
-            sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae],
+            sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
         }
     }
@@ -136,8 +158,13 @@ impl Default for TableConfig {
 impl TableConfig {
     /// Checks what a run would otherwise find out late.
     pub fn validate(&self) -> Result<()> {
-        if self.sets.contains(&SetKind::Physics) && !self.sets.contains(&SetKind::Vae) {
+        if self.has(SetKind::Physics) && !self.has(SetKind::Vae) && !self.has(SetKind::Ik) {
             return Err(EvalError::PhysicsNeedsVae);
+        }
+        if self.has(SetKind::VaeIk) && !(self.has(SetKind::Vae) && self.has(SetKind::Ik)) {
+            return Err(EvalError::Config(
+                "the vae_ik set is the vae and ik sets together: add both".into(),
+            ));
         }
         let config = |m: &str| Err(EvalError::Config(m.into()));
         if self.data.as_os_str().is_empty() {
@@ -166,7 +193,7 @@ impl TableConfig {
 }
 
 /// One class of one test actor.
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct TableCell {
     pub class: String,
     pub matched_classes: Vec<String>,
@@ -241,13 +268,57 @@ pub fn run_table(config: &TableConfig, progress: &dyn Progress) -> Result<Table>
                 "== {class}, test actor {actor} ({:.0} s so far)",
                 started.elapsed().as_secs_f64()
             ));
-            let cell = run_cell(config, class, actor, progress)?;
+            let saved = config
+                .work
+                .join("cells")
+                .join(format!("{actor}_{class}.json"));
+            let cell = match finished_cell(&saved, config) {
+                Some(cell) => {
+                    progress.line(&format!("reusing the finished cell {}", saved.display()));
+                    cell
+                }
+                None => {
+                    let cell = run_cell(config, class, actor, progress)?;
+                    save_cell(&saved, config, &cell)?;
+                    cell
+                }
+            };
             table.cells.push(cell);
             table.seconds = started.elapsed().as_secs_f64();
             progress.cell_done(&table)?;
         }
     }
     Ok(table)
+}
+
+/// The cell saved at `path` if it was computed with what shapes `config`'s
+/// numbers ([`TableConfig::cell_key`]).
+fn finished_cell(path: &std::path::Path, config: &TableConfig) -> Option<TableCell> {
+    #[derive(Deserialize)]
+    struct Saved {
+        key: serde_json::Value,
+        cell: TableCell,
+    }
+    let text = std::fs::read(path).ok()?;
+    let saved: Saved = serde_json::from_slice(&text).ok()?;
+    (saved.key == config.cell_key()).then_some(saved.cell)
+}
+
+/// Saves a finished cell with its key, so a rerun reuses it.
+fn save_cell(path: &std::path::Path, config: &TableConfig, cell: &TableCell) -> Result<()> {
+    let json = serde_json::to_vec_pretty(&serde_json::json!({
+        "key": config.cell_key(),
+        "cell": cell,
+    }))
+    .map_err(|e| EvalError::Data(format!("{}: {e}", path.display())))?;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|source| EvalError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    motion::io::write_atomic(path, &json)?;
+    Ok(())
 }
 
 /// One class of one test actor: its synthesised sets, their scores, the
@@ -357,19 +428,63 @@ fn synthesised_sets(
             sample_vae(&model, count, Prior::Normal, 0)?,
         ));
     }
+    if config.has(SetKind::VaeIk) {
+        let union = union_of(&sets, "vae_near", "ik");
+        sets.push(("vae_ik".into(), time_warped(&union)?));
+    }
     if config.has(SetKind::Physics) {
-        let near = sets
-            .iter()
-            .find(|(n, _)| n == "vae_near")
-            .map(|(_, c)| c.as_slice())
-            .ok_or(EvalError::PhysicsNeedsVae)?;
-        let p = physics::correct_and_debias(&config.physics, &split.train, near, work, log)?;
-        sets.push(("vae_sub".into(), p.subset));
-        sets.push(("vae_corrected".into(), p.corrected));
-        sets.push(("vae_debiased".into(), p.debiased));
+        let to_correct: Vec<physics::ToCorrect<'_>> = [("vae", "vae_near"), ("ik", "ik")]
+            .into_iter()
+            .filter_map(|(row, set)| {
+                let clips = sets.iter().find(|(n, _)| n == set)?.1.as_slice();
+                Some(physics::ToCorrect { row, clips })
+            })
+            .collect();
+        if to_correct.is_empty() {
+            return Err(EvalError::PhysicsNeedsVae);
+        }
+        let p = physics::correct_and_debias(&config.physics, &split.train, &to_correct, work, log)?;
+        for set in p.sets {
+            let row = set.row;
+            sets.push((format!("{row}_sub"), set.subset));
+            sets.push((format!("{row}_corrected"), set.corrected));
+            sets.push((format!("{row}_debiased"), set.debiased));
+        }
         cell.physics = Some(p.summary);
+        if config.has(SetKind::VaeIk) {
+            for stage in ["sub", "corrected", "debiased"] {
+                let union = union_of(&sets, &format!("vae_{stage}"), &format!("ik_{stage}"));
+                sets.push((format!("vae_ik_{stage}"), time_warped(&union)?));
+            }
+        }
     }
     Ok(sets)
+}
+
+/// The clips of sets `a` and `b` together (a set not made adds nothing).
+fn union_of(sets: &[Set], a: &str, b: &str) -> Vec<(String, Motion)> {
+    [a, b]
+        .iter()
+        .filter_map(|name| sets.iter().find(|(n, _)| n == name))
+        .flat_map(|(_, clips)| clips.iter().cloned())
+        .collect()
+}
+
+/// Every clip time-warped (MotionAug Sec. 4.3: 10 % shorter to 10 % longer),
+/// its factor drawn from a seed of its name: a clip gets the same factor in
+/// every row it is in (as made, corrected, debiased), so rows differ only by
+/// what the correction did.
+fn time_warped(clips: &[(String, Motion)]) -> Result<Vec<(String, Motion)>> {
+    let params = synth::TimeWarpParams::default();
+    clips
+        .iter()
+        .map(|(name, m)| {
+            let mut rng = synth::rng_from_seed(synth::output_seed(1, name, 0, 0));
+            let warped = synth::time_warp(m, &params, &mut rng)
+                .map_err(|e| EvalError::Data(format!("time warp of `{name}`: {e}")))?;
+            Ok((format!("{name}__tw"), warped.motion))
+        })
+        .collect()
 }
 
 /// One model's prediction error without augmentation and with each set of
@@ -435,7 +550,7 @@ mod tests {
 
     #[test]
     fn set_kinds_read_and_print_as_the_json_names_them() {
-        for k in [SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::Physics] {
+        for k in SetKind::ALL {
             assert_eq!(k.to_string().parse::<SetKind>(), Ok(k));
             assert_eq!(
                 serde_json::to_value(k).ok(),
@@ -443,6 +558,117 @@ mod tests {
             );
         }
         assert!("vaee".parse::<SetKind>().is_err());
+    }
+
+    #[test]
+    fn vae_and_ik_together_needs_both_sets_and_physics_needs_one_of_them() {
+        let mut c = config();
+        c.sets = vec![SetKind::Vae, SetKind::VaeIk];
+        assert!(matches!(c.validate(), Err(EvalError::Config(m)) if m.contains("vae_ik")));
+        c.sets.push(SetKind::Ik);
+        assert!(c.validate().is_ok());
+        c.sets = vec![SetKind::Ik, SetKind::Physics];
+        assert!(c.validate().is_ok());
+        c.sets = vec![SetKind::Noise, SetKind::Physics];
+        assert!(matches!(c.validate(), Err(EvalError::PhysicsNeedsVae)));
+    }
+
+    /// A two-joint clip of `frames` frames swinging at `speed`.
+    fn clip(frames: usize, speed: f64) -> Motion {
+        use motion::glam::{DQuat, DVec3};
+        let joint = |name: &str, parent: Option<usize>| motion::Joint {
+            name: name.into(),
+            parent,
+            offset: DVec3::new(0.0, 0.3, 0.0),
+            channels: vec![],
+            end_site: None,
+            limits: None,
+        };
+        let skeleton = motion::Skeleton::new(vec![joint("root", None), joint("a", Some(0))], 1.0)
+            .expect("a valid skeleton");
+        let rot = (0..frames)
+            .flat_map(|t| {
+                [
+                    DQuat::IDENTITY,
+                    DQuat::from_rotation_x((speed * t as f64).sin()),
+                ]
+            })
+            .collect();
+        Motion::new(
+            std::sync::Arc::new(skeleton),
+            30.0,
+            vec![DVec3::ZERO; frames],
+            rot,
+        )
+        .expect("a valid motion")
+    }
+
+    #[test]
+    fn a_clip_is_warped_by_the_same_factor_in_every_row() {
+        let made: Vec<(String, Motion)> = (0..8)
+            .map(|i| (format!("vae_Near_{i:04}"), clip(91, 0.1)))
+            .collect();
+        // The same clips after a correction: other poses, same names.
+        let corrected: Vec<(String, Motion)> = made
+            .iter()
+            .map(|(n, _)| (n.clone(), clip(91, 0.2)))
+            .collect();
+        let (a, b) = (
+            time_warped(&made).expect("warps"),
+            time_warped(&corrected).expect("warps"),
+        );
+        let frames: Vec<usize> = a.iter().map(|(_, m)| m.frames()).collect();
+        assert_eq!(
+            frames,
+            b.iter().map(|(_, m)| m.frames()).collect::<Vec<_>>()
+        );
+        for ((name, _), f) in a.iter().zip(&frames) {
+            assert!(name.ends_with("__tw"), "{name}");
+            // 90 frame steps played 0.9x to 1.1x as fast.
+            assert!((81..=101).contains(f), "{name}: {f} frames");
+        }
+        // Different clips draw different factors.
+        assert!(frames.iter().any(|f| *f != frames[0]), "{frames:?}");
+    }
+
+    #[test]
+    fn the_union_of_two_sets_skips_a_set_that_was_not_made() {
+        let sets: Vec<Set> = vec![
+            ("vae_near".into(), vec![("v".into(), clip(5, 0.1))]),
+            (
+                "ik".into(),
+                vec![("i".into(), clip(5, 0.1)), ("j".into(), clip(5, 0.1))],
+            ),
+        ];
+        let names = |u: Vec<(String, Motion)>| u.into_iter().map(|(n, _)| n).collect::<Vec<_>>();
+        assert_eq!(names(union_of(&sets, "vae_near", "ik")), ["v", "i", "j"]);
+        assert_eq!(names(union_of(&sets, "vae_sub", "ik")), ["i", "j"]);
+    }
+
+    #[test]
+    fn a_finished_cell_is_reused_only_when_what_shapes_it_is_the_same() {
+        let dir = std::env::temp_dir().join(format!("eval-cell-{}", std::process::id()));
+        let path = dir.join("cells").join("bd_kick.json");
+        let c = config();
+        let cell = TableCell {
+            class: "kick".into(),
+            test_actor: "bd".into(),
+            train_clips: 7,
+            ..TableCell::default()
+        };
+        assert!(finished_cell(&path, &c).is_none());
+        save_cell(&path, &c, &cell).expect("saves");
+        assert_eq!(finished_cell(&path, &c).map(|c| c.train_clips), Some(7));
+        // More classes or actors do not change a cell ...
+        let mut wider = c.clone();
+        wider.classes.push("walk".into());
+        wider.test_actors.push("mm".into());
+        assert!(finished_cell(&path, &wider).is_some());
+        // ... more iterations do.
+        let mut longer = c.clone();
+        longer.train.iterations += 1;
+        assert!(finished_cell(&path, &longer).is_none());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

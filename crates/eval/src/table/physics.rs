@@ -16,7 +16,7 @@
 //! [`pipeline::Tune`]: at most `correct_samples` PPO samples per clip on one
 //! rollout thread, and the samples' corrections kept in `work/samples/`.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -42,6 +42,17 @@ pub struct PhysicsConfig {
     pub correct_budget_s: f64,
     /// Debiasing network optimiser steps.
     pub debias_iterations: usize,
+    /// `clip`: every clip trains its own policy (warm-started from the best
+    /// corrected original), bounded by `correct_samples`; `class`: one tracker
+    /// per class and fold trained on the originals first, every clip judged
+    /// with it and fine-tuned for at most `clip_iterations` when it fails.
+    pub policy: pipeline::PolicyKind,
+    /// PPO iterations of the class tracker at most (`policy = class`).
+    pub tracker_iterations: u64,
+    /// Wall-time cap of the class tracker, seconds (`policy = class`).
+    pub tracker_budget_s: f64,
+    /// PPO iterations of a clip's fine-tuning at most (`policy = class`).
+    pub clip_iterations: u64,
 }
 
 impl Default for PhysicsConfig {
@@ -52,12 +63,21 @@ impl Default for PhysicsConfig {
             correct_samples: 40_960,
             correct_budget_s: 600.0,
             debias_iterations: 2000,
+            policy: pipeline::PolicyKind::Clip,
+            tracker_iterations: 150,
+            tracker_budget_s: 6000.0,
+            clip_iterations: 15,
         }
     }
 }
 
 impl PhysicsConfig {
     pub fn validate(&self) -> Result<()> {
+        if !(self.tracker_budget_s.is_finite() && self.tracker_budget_s > 0.0) {
+            return Err(EvalError::Config(
+                "the class tracker's time budget must be positive".into(),
+            ));
+        }
         if !(self.correct_budget_s.is_finite() && self.correct_budget_s > 0.0) {
             return Err(EvalError::Config(
                 "the correction's time budget must be positive".into(),
@@ -67,7 +87,8 @@ impl PhysicsConfig {
     }
 }
 
-/// What the correction did to one set, for the table's JSON.
+/// What the correction did, for the table's JSON: the originals, and the
+/// samples of every corrected set together and (`by_set`) each on its own.
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct PhysicsSummary {
     pub originals: usize,
@@ -81,17 +102,61 @@ pub struct PhysicsSummary {
     /// Mean R_norm of the same samples tracked with action 0.
     pub mean_r_norm_action0: f64,
     pub mean_residual_force_ratio: f64,
+    /// The same counts and means per corrected set (`vae`, `ik`).
+    #[serde(default)]
+    pub by_set: BTreeMap<String, SetCorrection>,
     /// PPO samples and wall seconds spent, originals and samples together.
     pub ppo_samples: u64,
     pub seconds: f64,
 }
 
-/// The three sets the table compares (the same samples before correction,
-/// after it, after debiasing) and what it cost.
-pub struct PhysicsSets {
+/// What the correction did to the subset of one synthesised set.
+#[derive(Debug, Clone, Serialize, Deserialize, Default, PartialEq)]
+pub struct SetCorrection {
+    pub samples: usize,
+    pub samples_accepted: usize,
+    pub mean_r_norm: f64,
+    pub mean_r_norm_action0: f64,
+    pub mean_residual_force_ratio: f64,
+}
+
+impl SetCorrection {
+    fn of<'a>(reports: impl Iterator<Item = &'a correct::Report>) -> SetCorrection {
+        let mut s = SetCorrection::default();
+        for r in reports {
+            s.samples += 1;
+            s.samples_accepted += usize::from(r.accepted);
+            s.mean_r_norm += r.r_norm;
+            s.mean_r_norm_action0 += r.r_norm_action0;
+            s.mean_residual_force_ratio += r.residual_force_ratio;
+        }
+        let n = s.samples.max(1) as f64;
+        s.mean_r_norm /= n;
+        s.mean_r_norm_action0 /= n;
+        s.mean_residual_force_ratio /= n;
+        s
+    }
+}
+
+/// A synthesised set whose subset the table corrects: the prefix of its rows
+/// (`vae` -> `vae_sub`, `vae_corrected`, `vae_debiased`) and its clips.
+pub struct ToCorrect<'a> {
+    pub row: &'a str,
+    pub clips: &'a [(String, Motion)],
+}
+
+/// One corrected set's three versions of the same clips: as made, after
+/// correction (accepted clips only), after debiasing.
+pub struct CorrectedSet {
+    pub row: String,
     pub subset: Vec<(String, Motion)>,
     pub corrected: Vec<(String, Motion)>,
     pub debiased: Vec<(String, Motion)>,
+}
+
+/// Every corrected set and what the correction cost.
+pub struct PhysicsSets {
+    pub sets: Vec<CorrectedSet>,
     pub summary: PhysicsSummary,
 }
 
@@ -105,14 +170,19 @@ pub fn spread<T: Clone>(items: &[T], count: usize) -> Vec<T> {
         .collect()
 }
 
-/// The sample bound and the single rollout thread of every correction.
+/// The single rollout thread of every correction, and (per-clip policies)
+/// the sample bound; a class tracker and its fine-tuning are bounded by
+/// iterations instead (a sample bound would cut the tracker short).
 fn tune(config: &PhysicsConfig) -> impl Fn(&mut correct::CorrectConfig) + Sync + use<> {
-    let max_samples = config.correct_samples;
+    let max_samples =
+        (config.policy == pipeline::PolicyKind::Clip).then_some(config.correct_samples);
     move |c: &mut correct::CorrectConfig| {
         // One rollout thread: the table runs one class per process, and two
         // processes share this 2-core machine.
         c.ppo.threads = 1;
-        c.max_samples = Some(max_samples);
+        if max_samples.is_some() {
+            c.max_samples = max_samples;
+        }
     }
 }
 
@@ -143,6 +213,16 @@ impl Seen {
             pipeline::Event::JobStarted { job } => {
                 self.job_started = Some(Instant::now());
                 match &job.kind {
+                    pipeline::JobKind::Tracker { clips, .. } => log(&format!(
+                        "class tracker: training on {} originals",
+                        clips.len()
+                    )),
+                    pipeline::JobKind::Correct {
+                        tracker: Some(_), ..
+                    } if !self.said_warm_start => {
+                        self.said_warm_start = true;
+                        log("warm start: every sample starts from the class tracker");
+                    }
                     pipeline::JobKind::Correct { .. } if !self.said_warm_start => {
                         self.said_warm_start = true;
                         log(&warm_start_line(originals, &self.reports));
@@ -151,6 +231,15 @@ impl Seen {
                         self.debias_started = Some(Instant::now())
                     }
                     _ => {}
+                }
+            }
+            pipeline::Event::JobFinished { job, ok } => {
+                if matches!(job.kind, pipeline::JobKind::Tracker { .. }) {
+                    log(&format!(
+                        "class tracker: {} in {:.0} s",
+                        if ok { "trained" } else { "failed" },
+                        self.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                    ));
                 }
             }
             pipeline::Event::Corrected {
@@ -200,37 +289,58 @@ fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
         .collect()
 }
 
-/// Corrects `samples` (a subset of them, see [`PhysicsConfig`]) and the
+/// Corrects a subset of each of `sets` (see [`PhysicsConfig`]) and the
 /// training clips in `work`, then debiases; finished corrections in `work`
-/// are reused, interrupted ones resumed.
+/// are reused, interrupted ones resumed. The originals' corrections and the
+/// debiaser are shared by all sets.
 pub fn correct_and_debias(
     config: &PhysicsConfig,
     train: &[(String, Motion)],
-    samples: &[(String, Motion)],
+    sets: &[ToCorrect<'_>],
     work: &Path,
     log: Log,
 ) -> Result<PhysicsSets> {
     let started = Instant::now();
-    let subset = spread(samples, config.correct_count.unwrap_or(2 * train.len()));
+    let per_set = config.correct_count.unwrap_or(2 * train.len());
+    let subsets: Vec<Vec<(String, Motion)>> =
+        sets.iter().map(|s| spread(s.clips, per_set)).collect();
     let originals = spread(train, config.correct_originals.unwrap_or(train.len()));
-    if originals.is_empty() || subset.is_empty() {
+    let all_samples: Vec<&(String, Motion)> = subsets.iter().flatten().collect();
+    if originals.is_empty() || all_samples.is_empty() {
         return Err(EvalError::Data(format!(
             "nothing to correct ({} training clips, {} samples)",
             originals.len(),
-            subset.len()
+            all_samples.len()
         )));
     }
     let original_names: Vec<String> = originals.iter().map(|(n, _)| n.clone()).collect();
-    let sample_names: Vec<String> = subset.iter().map(|(n, _)| n.clone()).collect();
-    // Seeds as the table always had them: the originals 0.., then the samples.
+    let sample_names: Vec<String> = all_samples.iter().map(|(n, _)| n.clone()).collect();
+    let mut unique = HashSet::new();
+    if let Some(twice) = original_names
+        .iter()
+        .chain(&sample_names)
+        .find(|n| !unique.insert(n.as_str()))
+    {
+        return Err(EvalError::Data(format!(
+            "two clips to correct are both called `{twice}`"
+        )));
+    }
+    // Seeds as the table always had them: the originals 0.., then the
+    // samples, set after set (the VAE's first, so its seeds did not change
+    // when the IK edits joined).
     let seeds: HashMap<&str, u64> = original_names
         .iter()
         .chain(&sample_names)
         .enumerate()
         .map(|(i, n)| (n.as_str(), i as u64))
         .collect();
+    let class = config.policy == pipeline::PolicyKind::Class;
     let step = pipeline::CorrectStep {
         time_budget_s: config.correct_budget_s,
+        policy: config.policy,
+        max_iterations: class.then_some(config.clip_iterations),
+        tracker_iterations: Some(config.tracker_iterations),
+        tracker_budget_s: config.tracker_budget_s,
         ..pipeline::CorrectStep::default()
     };
     let debias = debias::TrainConfig {
@@ -245,12 +355,12 @@ pub fn correct_and_debias(
         |name| seeds.get(name).copied().unwrap_or(0),
     );
     let clips = pipeline::Clip::all_from(&originals);
-    let made: Vec<pipeline::WorkClip> = subset
+    let made: Vec<pipeline::WorkClip> = all_samples
         .iter()
         .map(|(name, m)| pipeline::WorkClip::given(name, m.clone()))
         .collect();
 
-    let total = originals.len() + subset.len();
+    let total = originals.len() + all_samples.len();
     let seen = Mutex::new(Seen::default());
     let on_event = |event: pipeline::Event<'_>| {
         if let Ok(mut seen) = seen.lock() {
@@ -284,13 +394,11 @@ pub fn correct_and_debias(
     };
     let mut summary = PhysicsSummary {
         originals: originals.len(),
-        samples: subset.len(),
         ..PhysicsSummary::default()
     };
     for name in &original_names {
-        let r = report(name);
         // A missing report is a failed job, listed below.
-        if let Ok(r) = r {
+        if let Ok(r) = report(name) {
             summary.ppo_samples += r.samples;
             summary.originals_accepted += usize::from(r.accepted);
         }
@@ -302,24 +410,17 @@ pub fn correct_and_debias(
     if !failures.is_empty() {
         return Err(EvalError::Correction(failures.join("; ")));
     }
-
-    let (mut r, mut r0, mut force) = (0.0, 0.0, 0.0);
-    for name in &sample_names {
-        let rep = report(name)?;
-        summary.ppo_samples += rep.samples;
-        r += rep.r_norm;
-        r0 += rep.r_norm_action0;
-        force += rep.residual_force_ratio;
-    }
-    let n = subset.len() as f64;
-    summary.mean_r_norm = r / n;
-    summary.mean_r_norm_action0 = r0 / n;
-    summary.mean_residual_force_ratio = force / n;
-    let corrected: Vec<(String, Motion)> = sample_names
+    let sample_reports = sample_names
         .iter()
-        .filter_map(|name| Some((name.clone(), seen.corrected.get(name)?.clone())))
-        .collect();
-    summary.samples_accepted = corrected.len();
+        .map(|n| report(n))
+        .collect::<Result<Vec<_>>>()?;
+    summary.ppo_samples += sample_reports.iter().map(|r| r.samples).sum::<u64>();
+    let all = SetCorrection::of(sample_reports.into_iter());
+    summary.samples = all.samples;
+    summary.samples_accepted = all.samples_accepted;
+    summary.mean_r_norm = all.mean_r_norm;
+    summary.mean_r_norm_action0 = all.mean_r_norm_action0;
+    summary.mean_residual_force_ratio = all.mean_residual_force_ratio;
 
     // The debiased clips are the run's outputs (debias_apply finishes them).
     let mut outputs: HashMap<String, Motion> = run
@@ -327,27 +428,45 @@ pub fn correct_and_debias(
         .into_iter()
         .map(|o| (o.name, o.motion))
         .collect();
-    let debiased: Vec<(String, Motion)> = corrected
-        .iter()
-        .filter_map(|(name, _)| Some((name.clone(), outputs.remove(name)?)))
-        .collect();
+    let mut corrected_sets = Vec::new();
+    for (set, subset) in sets.iter().zip(subsets) {
+        let reports = subset
+            .iter()
+            .map(|(n, _)| report(n))
+            .collect::<Result<Vec<_>>>()?;
+        summary
+            .by_set
+            .insert(set.row.to_string(), SetCorrection::of(reports.into_iter()));
+        let corrected: Vec<(String, Motion)> = subset
+            .iter()
+            .filter_map(|(name, _)| Some((name.clone(), seen.corrected.get(name)?.clone())))
+            .collect();
+        let debiased: Vec<(String, Motion)> = corrected
+            .iter()
+            .filter_map(|(name, _)| Some((name.clone(), outputs.remove(name)?)))
+            .collect();
+        corrected_sets.push(CorrectedSet {
+            row: set.row.to_string(),
+            subset,
+            corrected,
+            debiased,
+        });
+    }
+    let debiased_count: usize = corrected_sets.iter().map(|s| s.debiased.len()).sum();
     if no_pairs {
-        // Nothing to learn the simulation's bias from: the row stays empty.
+        // Nothing to learn the simulation's bias from: the rows stay empty.
         log("debias: no original passed its correction; no debiased set");
     } else {
         log(&format!(
-            "debias: trained on {} pairs, applied to {} clips in {:.1} s",
+            "debias: trained on {} pairs, applied to {debiased_count} clips in {:.1} s",
             summary.debias_pairs,
-            debiased.len(),
             seen.debias_started
                 .map_or(0.0, |t| t.elapsed().as_secs_f64())
         ));
     }
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(PhysicsSets {
-        subset,
-        corrected,
-        debiased,
+        sets: corrected_sets,
         summary,
     })
 }

@@ -2,20 +2,22 @@
 //! every cell) and `table.md` (per test actor: a prediction table per model,
 //! the synthesis and plausibility tables, the correction's summary).
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
 use serde_json::{Value, json};
 
-use super::{PREDICT_CONDITIONS, SetKind, Table, TableCell};
+use super::{PREDICT_CONDITIONS, SetKind, Table, TableCell, TableConfig};
 use crate::error::{EvalError, Result};
 use crate::predict::data::HORIZONS_MS;
+use crate::predict::protocol::Horizons;
 use crate::scores::SynthScores;
 
-impl Table {
+impl TableConfig {
     /// The config as table.json records it (what shapes the numbers, no paths).
-    pub fn config_json(&self) -> Value {
-        let c = &self.config;
+    pub fn to_json(&self) -> Value {
+        let c = self;
         let t = &c.train;
         json!({
             "classes": c.classes,
@@ -38,6 +40,25 @@ impl Table {
         })
     }
 
+    /// What shapes one cell's numbers: the config but for which classes and
+    /// test actors the table has (a finished cell is reused when its key is
+    /// this).
+    pub fn cell_key(&self) -> Value {
+        let mut v = self.to_json();
+        if let Some(map) = v.as_object_mut() {
+            map.remove("classes");
+            map.remove("test_actors");
+        }
+        v
+    }
+}
+
+impl Table {
+    /// The config as table.json records it.
+    pub fn config_json(&self) -> Value {
+        self.config.to_json()
+    }
+
     /// table.json's content.
     pub fn to_json(&self) -> Value {
         json!({ "config": self.config_json(), "seconds": self.seconds, "cells": self.cells })
@@ -52,6 +73,18 @@ impl Table {
             self.config_json(),
             self.seconds
         );
+        let runs_per_class = self.config.train.seeds.len().max(1)
+            * self
+                .config
+                .test_actors
+                .iter()
+                .filter(|a| self.cells.iter().any(|c| &c.test_actor == *a))
+                .count();
+        if runs_per_class > 1 {
+            for model in &self.config.models {
+                aggregate_tables(&mut md, &model.to_string(), &self.cells);
+            }
+        }
         for actor in &self.config.test_actors {
             let row_cells: Vec<&TableCell> = self
                 .cells
@@ -167,6 +200,172 @@ fn prediction_table(md: &mut String, m: &str, actor: &str, row_cells: &[&TableCe
     md.push('\n');
 }
 
+/// The full method's row: VAE & IK corrected and debiased, else the best
+/// combination that was made.
+const FULL_METHOD: [&str; 3] = ["vae_ik_debiased", "vae_debiased", "ik_debiased"];
+
+/// Mean and sample standard deviation (0 for one value).
+fn mean_sd(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n.max(1.0);
+    if values.len() < 2 {
+        return (mean, 0.0);
+    }
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, var.sqrt())
+}
+
+/// One condition's errors of one model and class, by (test actor, seed
+/// index): the runs the aggregate tables average and pair.
+fn runs<'a>(
+    cells: &[&'a TableCell],
+    model: &str,
+    cond: &str,
+) -> BTreeMap<(String, usize), &'a Horizons> {
+    let mut out = BTreeMap::new();
+    for c in cells {
+        if let Some(r) = c.predict.get(model).and_then(|p| p.get(cond)) {
+            for (i, h) in r.per_seed.iter().enumerate() {
+                out.insert((c.test_actor.clone(), i), h);
+            }
+        }
+    }
+    out
+}
+
+/// Over test actors and seeds, for one model: the mean and spread of every
+/// condition per class, the condition with the lowest mean per class, and the
+/// full method's paired differences to the rows it must beat.
+fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
+    let mut classes: Vec<&str> = Vec::new();
+    for c in all {
+        if !classes.contains(&c.class.as_str()) {
+            classes.push(&c.class);
+        }
+    }
+    let by_class: Vec<(&str, Vec<&TableCell>)> = classes
+        .iter()
+        .map(|k| (*k, all.iter().filter(|c| c.class == *k).collect()))
+        .collect();
+    let made = |cond: &str| {
+        all.iter()
+            .any(|c| c.predict.get(m).is_some_and(|p| p.contains_key(cond)))
+    };
+    if !made("no_aug") {
+        return;
+    }
+    let conditions: Vec<&str> = ["no_aug"]
+        .into_iter()
+        .chain(PREDICT_CONDITIONS.into_iter().filter(|c| made(c)))
+        .collect();
+    let _ = writeln!(
+        md,
+        "## Prediction error, {m}, over test actors and seeds: mean +- sd (Euler, rad; 100 / 200 / 400 ms)\n"
+    );
+    let mut header = String::from("| condition |");
+    let mut rule = String::from("|---|");
+    for (class, cells) in &by_class {
+        let n = runs(cells, m, "no_aug").len();
+        let _ = write!(header, " {class} (n = {n}) |");
+        rule.push_str("---|");
+    }
+    let _ = writeln!(md, "{header}\n{rule}");
+    // (class, condition) -> mean per horizon, for the ranking below.
+    let mut means: BTreeMap<(&str, &str), Vec<f64>> = BTreeMap::new();
+    for cond in &conditions {
+        let mut line = format!("| {cond} |");
+        for (class, cells) in &by_class {
+            let r = runs(cells, m, cond);
+            if r.is_empty() {
+                line.push_str(" - |");
+                continue;
+            }
+            let cols: Vec<String> = HORIZONS_MS
+                .iter()
+                .map(|ms| {
+                    let v: Vec<f64> = r
+                        .values()
+                        .filter_map(|h| h.get(&ms.to_string()).copied())
+                        .collect();
+                    let (mean, sd) = mean_sd(&v);
+                    means.entry((*class, *cond)).or_default().push(mean);
+                    format!("{mean:.3} +- {sd:.3}")
+                })
+                .collect();
+            let _ = write!(line, " {} |", cols.join(" / "));
+        }
+        let _ = writeln!(md, "{line}");
+    }
+    md.push('\n');
+
+    let _ = writeln!(md, "Lowest mean error per class (100 / 200 / 400 ms):\n");
+    for (class, _) in &by_class {
+        let best: Vec<String> = (0..HORIZONS_MS.len())
+            .map(|i| {
+                conditions
+                    .iter()
+                    .filter_map(|cond| Some((*cond, *means.get(&(*class, *cond))?.get(i)?)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map_or("-".to_string(), |(cond, _)| cond.to_string())
+            })
+            .collect();
+        let _ = writeln!(md, "- {class}: {}", best.join(" / "));
+    }
+    md.push('\n');
+
+    let Some(full) = FULL_METHOD.into_iter().find(|c| made(c)) else {
+        return;
+    };
+    let stem = full.trim_end_matches("_debiased");
+    let others: Vec<String> = ["no_aug".to_string(), "noise".to_string(), stem.to_string()]
+        .into_iter()
+        .chain([format!("{stem}_sub"), format!("{stem}_corrected")])
+        .filter(|c| made(c))
+        .collect();
+    let _ = writeln!(
+        md,
+        "Paired differences, {full} minus each row, over the same (test actor, seed) runs: mean +- sd; * where |mean| > 2 sd / sqrt(n) (the difference exceeds the spread):\n"
+    );
+    let mut header = String::from("| minus |");
+    let mut rule = String::from("|---|");
+    for (class, _) in &by_class {
+        let _ = write!(header, " {class} |");
+        rule.push_str("---|");
+    }
+    let _ = writeln!(md, "{header}\n{rule}");
+    for other in &others {
+        let mut line = format!("| {other} |");
+        for (_, cells) in &by_class {
+            let a = runs(cells, m, full);
+            let b = runs(cells, m, other);
+            let pairs: Vec<(&Horizons, &Horizons)> = a
+                .iter()
+                .filter_map(|(k, ha)| Some((*ha, *b.get(k)?)))
+                .collect();
+            if pairs.is_empty() {
+                line.push_str(" - |");
+                continue;
+            }
+            let cols: Vec<String> = HORIZONS_MS
+                .iter()
+                .map(|ms| {
+                    let key = ms.to_string();
+                    let d: Vec<f64> = pairs
+                        .iter()
+                        .filter_map(|(ha, hb)| Some(ha.get(&key)? - hb.get(&key)?))
+                        .collect();
+                    let (mean, sd) = mean_sd(&d);
+                    let beyond = d.len() > 1 && mean.abs() > 2.0 * sd / (d.len() as f64).sqrt();
+                    format!("{mean:+.3} +- {sd:.3}{}", if beyond { "*" } else { "" })
+                })
+                .collect();
+            let _ = write!(line, " {} |", cols.join(" / "));
+        }
+        let _ = writeln!(md, "{line}");
+    }
+    md.push('\n');
+}
+
 /// One Markdown table: a row per synthesised set, a column per class.
 fn set_table(
     md: &mut String,
@@ -211,9 +410,19 @@ fn correction_table(md: &mut String, actor: &str, row_cells: &[&TableCell]) {
     );
     for c in row_cells {
         if let Some(p) = &c.physics {
+            let per_set: Vec<String> = p
+                .by_set
+                .iter()
+                .map(|(set, s)| format!("{set} {}/{}", s.samples_accepted, s.samples))
+                .collect();
+            let per_set = if per_set.len() > 1 {
+                format!(" ({})", per_set.join(", "))
+            } else {
+                String::new()
+            };
             let _ = writeln!(
                 md,
-                "| {} | {}/{} | {}/{} | {:.3} -> {:.3} | {:.3} | {} | {:.0} |",
+                "| {} | {}/{} | {}/{}{per_set} | {:.3} -> {:.3} | {:.3} | {} | {:.0} |",
                 c.class,
                 p.originals_accepted,
                 p.originals,
@@ -273,6 +482,17 @@ mod tests {
                 originals_accepted: 2,
                 samples: 4,
                 samples_accepted: 1,
+                by_set: [("vae", 1), ("ik", 0)]
+                    .into_iter()
+                    .map(|(set, accepted)| {
+                        let s = crate::table::physics::SetCorrection {
+                            samples: 2,
+                            samples_accepted: accepted,
+                            ..Default::default()
+                        };
+                        (set.to_string(), s)
+                    })
+                    .collect(),
                 ..PhysicsSummary::default()
             }),
             ..TableCell::default()
@@ -305,7 +525,75 @@ mod tests {
              | no_aug | 1.000 / 2.000 / 3.000 |\n"
         ));
         assert!(md.contains("## Correction, test actor bd"), "{md}");
-        assert!(md.contains("| kick | 2/3 | 1/4 |"), "{md}");
+        assert!(
+            md.contains("| kick | 2/3 | 1/4 (ik 0/2, vae 1/2) |"),
+            "{md}"
+        );
+    }
+
+    /// A condition of two seeds whose errors at every horizon are `a` and `b`.
+    fn seeds(a: f64, b: f64) -> ConditionResult {
+        let flat = |v: f64| horizons(v).into_keys().map(|k| (k, v)).collect();
+        ConditionResult {
+            errors: flat((a + b) / 2.0),
+            per_seed: vec![flat(a), flat(b)],
+            train_clips: 3,
+            train_windows: 10,
+            skipped_clips: 0,
+            train_seconds: vec![0.1, 0.1],
+            first_loss: 1.0,
+            last_loss: 0.5,
+        }
+    }
+
+    #[test]
+    fn over_actors_and_seeds_the_full_method_is_paired_with_each_row() {
+        // Two test actors x two seeds; the debiased row is 0.1 below no_aug
+        // in every run, and +0.1 or -0.3 from noise (no consistent sign).
+        let cell = |actor: &str, base: f64| TableCell {
+            class: "kick".into(),
+            test_actor: actor.into(),
+            predict: [(
+                "gcn".to_string(),
+                [
+                    ("no_aug".to_string(), seeds(base, base + 0.2)),
+                    ("noise".to_string(), seeds(base - 0.2, base + 0.4)),
+                    ("vae_debiased".to_string(), seeds(base - 0.1, base + 0.1)),
+                ]
+                .into_iter()
+                .collect(),
+            )]
+            .into_iter()
+            .collect(),
+            ..TableCell::default()
+        };
+        let mut t = table();
+        t.config.test_actors = vec!["bd".into(), "mm".into()];
+        t.config.train.seeds = vec![0, 1];
+        t.config.models = vec![ModelKind::Gcn];
+        t.cells = vec![cell("bd", 1.0), cell("mm", 2.0)];
+        let md = t.to_markdown();
+        assert!(
+            md.contains("## Prediction error, gcn, over test actors and seeds: mean +- sd"),
+            "{md}"
+        );
+        // no_aug runs: 1.0, 1.2, 2.0, 2.2 -> mean 1.6, sd sqrt(1.04 / 3).
+        assert!(md.contains("| kick (n = 4) |"), "{md}");
+        assert!(
+            md.contains("| no_aug | 1.600 +- 0.589 / 1.600 +- 0.589 /"),
+            "{md}"
+        );
+        assert!(
+            md.contains("- kick: vae_debiased / vae_debiased / vae_debiased"),
+            "{md}"
+        );
+        // Against no_aug: -0.1 in every run (sd 0): beyond the spread.
+        assert!(md.contains("| no_aug | -0.100 +- 0.000* /"), "{md}");
+        // Against noise: +0.1, -0.3, +0.1, -0.3: mean -0.1, sd 0.231, and
+        // 2 sd / sqrt(4) = 0.231 > 0.1: within the spread.
+        assert!(md.contains("| noise | -0.100 +- 0.231 /"), "{md}");
+        // One actor, one seed: no aggregate section.
+        assert!(!table().to_markdown().contains("over test actors and seeds"));
     }
 
     #[test]
@@ -314,7 +602,7 @@ mod tests {
         let v = t.to_json();
         assert_eq!(v["seconds"], 12.0);
         assert_eq!(v["config"]["models"], json!(["seq2seq", "gcn"]));
-        assert_eq!(v["config"]["sets"], json!(["noise", "ik", "vae"]));
+        assert_eq!(v["config"]["sets"], json!(["noise", "ik", "vae", "vae_ik"]));
         // No physics set, no physics config; no paths.
         assert!(v["config"]["physics"].is_null());
         assert!(v["config"].get("data").is_none());
