@@ -317,11 +317,17 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
         return;
     };
     let stem = full.trim_end_matches("_debiased");
-    let others: Vec<String> = ["no_aug".to_string(), "noise".to_string(), stem.to_string()]
-        .into_iter()
-        .chain([format!("{stem}_sub"), format!("{stem}_corrected")])
-        .filter(|c| made(c))
-        .collect();
+    // The same synthesis as made: the VAE's set is called vae_near.
+    let as_made = if stem == "vae" { "vae_near" } else { stem };
+    let others: Vec<String> = [
+        "no_aug".to_string(),
+        "noise".to_string(),
+        as_made.to_string(),
+    ]
+    .into_iter()
+    .chain([format!("{stem}_sub"), format!("{stem}_corrected")])
+    .filter(|c| made(c))
+    .collect();
     let _ = writeln!(
         md,
         "Paired differences, {full} minus each row, over the same (test actor, seed) runs: mean +- sd; * where |mean| > 2 sd / sqrt(n) (the difference exceeds the spread):\n"
