@@ -1,6 +1,7 @@
 //! Training-step time of the VAE on HDM05 kick clips (actor bd, 30 fps), default
-//! and reference sizes, with and without the adversarial terms; and the LSTM's
-//! fused input projection against the per-step (naive) one, forward + backward.
+//! and reference sizes, with and without the adversarial terms; and one LSTM
+//! direction, forward + backward: the recurrence op against the same on candle's
+//! graph ops and the per-step (naive) version.
 //!
 //! `CARGO_TARGET_DIR=... cargo bench -p vae --bench train_step`
 //! (`-- quick` runs fewer steps).
@@ -41,18 +42,21 @@ fn time_steps(name: &str, clips: &[motion::Motion], config: &TrainConfig, steps:
     );
 }
 
+/// Forward + backward of one LSTM direction: the recurrence op
+/// (`Lstm::forward`), the same on candle's graph ops (`forward_graph`) and
+/// the per-step projection (`forward_naive`), interleaved in 3 rounds.
 fn time_lstm(b: usize, t: usize, i: usize, h: usize, reps: usize) {
     let p = Params::new(1);
     let lstm = Lstm::new(&p, "l", i, h).expect("lstm");
     let x = p.uniform("x", &[b, t, i], 1.0).expect("x");
     let mask = Tensor::ones((b, t), DType::F32, &Device::Cpu).expect("mask");
-    let run = |naive: bool| {
+    let run = |version: usize| {
         let start = Instant::now();
         for _ in 0..reps {
-            let y = if naive {
-                lstm.forward_naive(&x, &mask, Direction::Forward)
-            } else {
-                lstm.forward(&x, &mask, Direction::Forward)
+            let y = match version {
+                0 => lstm.forward(&x, &mask, Direction::Backward),
+                1 => lstm.forward_graph(&x, &mask, Direction::Backward),
+                _ => lstm.forward_naive(&x, &mask, Direction::Backward),
             }
             .expect("forward");
             y.sqr()
@@ -62,20 +66,29 @@ fn time_lstm(b: usize, t: usize, i: usize, h: usize, reps: usize) {
         }
         start.elapsed().as_secs_f64() * 1e3 / reps as f64
     };
-    let (fused, naive) = (run(false), run(true));
+    let mut ms = [0.0f64; 3];
+    for _ in 0..3 {
+        for (v, m) in ms.iter_mut().enumerate() {
+            *m += run(v) / 3.0;
+        }
+    }
+    let [op, graph, naive] = ms;
     println!(
-        "LSTM B{b} T{t} I{i} H{h} fwd+bwd: fused {fused:7.2} ms, naive {naive:7.2} ms ({:.2}x)",
-        naive / fused
+        "LSTM B{b} T{t} I{i} H{h} fwd+bwd: op {op:7.2} ms, graph {graph:7.2} ms ({:.2}x), naive {naive:7.2} ms ({:.2}x)",
+        graph / op,
+        naive / op
     );
 }
 
 fn main() {
+    nn::threads::init(); // candle on one thread, as the CLI runs it
     let quick = std::env::args().any(|a| a == "quick");
     let steps = if quick { 3 } else { 10 };
     let lstm_only = std::env::args().any(|a| a == "lstm");
     if lstm_only {
         let (d, r) = (VaeConfig::default(), VaeConfig::reference());
         time_lstm(6, 59, d.dec_input, d.dec_hidden, steps * 2);
+        time_lstm(23, 120, d.dec_input, d.dec_hidden, steps);
         time_lstm(6, 59, r.dec_input, r.dec_hidden, steps);
         return;
     }

@@ -18,7 +18,7 @@ use motion::Skeleton;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
-use crate::loss::{check_weights, masked_frame_mean, rotation_matrices};
+use crate::loss::{check_weights, masked_frame_mean, six_d_matrices};
 
 /// Weights and thresholds of the foot terms (all 0: the plain VAE loss).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -105,6 +105,10 @@ pub struct FootKinematics {
     /// Chain index and end-site offset `(1, 1, 3)` (`None`: the joint's own
     /// position).
     points: Vec<(usize, Option<Tensor>)>,
+    /// Columns of the chain joints' 6D rotations in a raw frame, chain order
+    /// (`u32`): one `index_select` instead of a slice per joint of all 31,
+    /// whose backward passes each padded their gradient to the whole frame.
+    columns: Tensor,
 }
 
 /// A constant offset as a `(1, 1, 3)` row vector, built once per skeleton.
@@ -142,10 +146,16 @@ impl FootKinematics {
             .iter()
             .map(|&(j, e)| Ok((index[j], e.map(row).transpose()?)))
             .collect::<Result<_>>()?;
+        let columns: Vec<u32> = chain
+            .iter()
+            .flat_map(|c| (0..6).map(move |k| (3 + 6 * c.joint + k) as u32))
+            .collect();
+        let columns = Tensor::from_vec(columns, 6 * chain.len(), &Device::Cpu)?;
         Ok(Some(FootKinematics {
             joints: skeleton.len(),
             chain,
             points,
+            columns,
         }))
     }
 
@@ -167,12 +177,14 @@ impl FootKinematics {
         // Rows of each joint's 3x3 block are the columns of its rotation, so the
         // block is R^T: globals compose as M_child = M_local * M_parent and a
         // parent-frame offset o lands at o^T * M_parent.
-        let local = rotation_matrices(raw)?.reshape((n, self.joints, 3, 3))?;
+        let k = self.chain.len();
+        let six = raw.index_select(&self.columns, 2)?.reshape((b, t, k, 6))?;
+        let local = six_d_matrices(&six)?.reshape((n, k, 3, 3))?;
         let root = raw.narrow(2, 0, 3)?.reshape((n, 1, 3))?;
-        let mut global: Vec<Tensor> = Vec::with_capacity(self.chain.len());
-        let mut position: Vec<Tensor> = Vec::with_capacity(self.chain.len());
-        for c in &self.chain {
-            let m = local.narrow(1, c.joint, 1)?.squeeze(1)?;
+        let mut global: Vec<Tensor> = Vec::with_capacity(k);
+        let mut position: Vec<Tensor> = Vec::with_capacity(k);
+        for (i, c) in self.chain.iter().enumerate() {
+            let m = local.narrow(1, i, 1)?.squeeze(1)?;
             match c.parent {
                 None => {
                     global.push(m);

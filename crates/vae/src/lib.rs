@@ -24,6 +24,7 @@ pub mod feet;
 pub mod latent;
 pub mod loss;
 pub mod lstm;
+mod lstm_op;
 pub mod model;
 pub mod normalize;
 pub mod train;

@@ -87,6 +87,12 @@ pub fn rotation_matrices(raw: &Tensor) -> Result<Tensor> {
     let (b, t, f) = raw.dims3()?;
     let joints = (f - 3) / 6;
     let six = raw.narrow(2, 3, 6 * joints)?.reshape((b, t, joints, 6))?;
+    Ok(six_d_matrices(&six)?.reshape((b, t, 9 * joints))?)
+}
+
+/// `(B, T, J, 6)` 6D rotations -> `(B, T, J, 9)` rotation matrices (Gram-Schmidt),
+/// rows `[x axis, y axis, z axis]`.
+pub fn six_d_matrices(six: &Tensor) -> Result<Tensor> {
     let unit = |v: &Tensor| -> Result<Tensor> {
         let n = (v.sqr()?.sum_keepdim(D::Minus1)? + 1e-8)?.sqrt()?;
         Ok(v.broadcast_div(&n)?)
@@ -104,7 +110,7 @@ pub fn rotation_matrices(raw: &Tensor) -> Result<Tensor> {
         ],
         3,
     )?;
-    Ok(Tensor::cat(&[x, y, z], 3)?.reshape((b, t, 9 * joints))?)
+    Ok(Tensor::cat(&[x, y, z], 3)?)
 }
 
 /// Mean over valid frames of a per-frame value `(B, T)`.

@@ -1,19 +1,14 @@
-//! LSTM layers written on candle tensors, shaped for CPU speed.
+//! LSTM layers on candle tensors, shaped for CPU speed.
 //!
 //! The input projection `x_t W_ih^T + b` of every frame does not depend on the
 //! recurrent state, so it is one `(B*T, I) x (I, 4H)` matmul for the whole
-//! sequence; only `h_{t-1} W_hh^T` and the gate arithmetic run per step.
-//! [`Lstm::forward_naive`] is the textbook per-step version, kept as the reference
-//! the tests and the bench compare against.
-//!
-//! Why the LSTM stays here rather than in the `nn` crate, fused: one large matmul
-//! keeps the CPU's matmul kernels busy where T small ones mostly pay call and
-//! threading overhead, and the backward pass gets one large product too. Measured
-//! (`cargo bench -p vae --bench train_step -- quick lstm`, forward + backward,
-//! B6 T59, see the crate README): paper size H256 271 ms fused vs 367 ms per step
-//! (1.35x) with one thread, 602 vs 956 ms (1.59x) with default threads; at H128
-//! with one thread they are about even. That only holds with the projection sliced
-//! in blocks of ~sqrt(T) steps (below): before that the fused version was no faster.
+//! sequence; the recurrence (`h_{t-1} W_hh^T` and the gate arithmetic, step by
+//! step) is one op with its backward pass written out ([`crate::lstm_op`]):
+//! on candle's graph ops every step added a dozen nodes whose backward passes
+//! zero-padded and summed gradients. [`Lstm::forward_graph`] (the recurrence
+//! on graph ops) and [`Lstm::forward_naive`] (the textbook per-step version)
+//! are kept as the references the tests and the bench compare against.
+//! Measured side by side in the crate README.
 //!
 //! Gates are laid out `[i, f, g, o]` (PyTorch's order). Sequences are padded at the
 //! end; a backward (reversed) pass must start at each sequence's last valid frame,
@@ -24,6 +19,7 @@
 use candle_core::{D, Tensor};
 
 use crate::error::Result;
+use crate::lstm_op::Recurrence;
 use nn::Params;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,6 +30,7 @@ pub enum Direction {
 
 pub struct Lstm {
     w_ih_t: Tensor,
+    w_hh: Tensor,
     w_hh_t: Tensor,
     bias: Tensor,
     hidden: usize,
@@ -52,6 +49,7 @@ impl Lstm {
         Ok(Lstm {
             w_ih_t: w_ih.t()?,
             w_hh_t: w_hh.t()?,
+            w_hh,
             bias,
             hidden,
         })
@@ -62,17 +60,48 @@ impl Lstm {
     }
 
     /// `x`: `(B, T, I)`; `mask`: `(B, T)` of 0/1, used by the backward direction.
-    /// Returns `(B, T, H)`, outputs in time order for both directions.
+    /// Returns `(B, T, H)`, outputs in time order for both directions. The
+    /// recurrence is one op with its own backward pass ([`crate::lstm_op`]).
     pub fn forward(&self, x: &Tensor, mask: &Tensor, dir: Direction) -> Result<Tensor> {
+        let (b, t, _) = x.dims3()?;
+        let proj = self.projection(x)?;
+        let mask = match dir {
+            Direction::Forward => None,
+            Direction::Backward => Some(
+                mask.to_dtype(candle_core::DType::F32)?
+                    .t()?
+                    .flatten_all()?
+                    .to_vec1::<f32>()?,
+            ),
+        };
+        let op = Recurrence {
+            steps: t,
+            batch: b,
+            hidden: self.hidden,
+            reverse: dir == Direction::Backward,
+            mask,
+            trace: Default::default(),
+        };
+        Ok(proj.apply_op2(&self.w_hh, op)?.transpose(0, 1)?)
+    }
+
+    /// `x W_ih^T + b` for every frame at once, time-major `(T, B, 4H)`.
+    fn projection(&self, x: &Tensor) -> Result<Tensor> {
         let (b, t, i) = x.dims3()?;
-        // Time-major so that a step's slice is contiguous.
-        let proj = x
-            .reshape((b * t, i))?
+        Ok(x.reshape((b * t, i))?
             .matmul(&self.w_ih_t)?
             .broadcast_add(&self.bias)?
             .reshape((b, t, 4 * self.hidden))?
             .transpose(0, 1)?
-            .contiguous()?;
+            .contiguous()?)
+    }
+
+    /// The recurrence written with candle's tensor ops on top of the fused
+    /// projection (the version before [`crate::lstm_op`]; kept for the bench
+    /// and the tests).
+    pub fn forward_graph(&self, x: &Tensor, mask: &Tensor, dir: Direction) -> Result<Tensor> {
+        let (b, t, _) = x.dims3()?;
+        let proj = self.projection(x)?;
         // candle's backward of a slice pads its gradient to the full tensor, so
         // slicing T steps straight out of the projection would cost O(T^2) in the
         // backward pass. Slicing blocks of ~sqrt(T) steps first, then steps out of
@@ -293,37 +322,65 @@ mod tests {
         }
     }
 
+    /// The op's hand-written backward pass against candle's autograd through
+    /// the per-step and the graph versions: gradients of every parameter and of
+    /// the input, both directions, one sequence padded.
     #[test]
-    fn gradients_match_between_fused_and_naive() {
+    fn gradients_match_between_the_op_the_graph_and_naive() {
+        let (b, t, i, h) = (3, 7, 3, 5);
         let p = Params::new(3);
-        let lstm = Lstm::new(&p, "l", 3, 4).unwrap();
-        let x = p.uniform("x", &[2, 6, 3], 1.0).unwrap();
-        let mask = Tensor::ones((2, 6), DType::F32, &Device::Cpu).unwrap();
-        let w = p
-            .vars()
-            .iter()
-            .find(|(n, _)| n == "l.w_hh")
-            .unwrap()
-            .1
-            .clone();
-        let grad = |naive: bool| {
-            let y = if naive {
-                lstm.forward_naive(&x, &mask, Direction::Backward).unwrap()
-            } else {
-                lstm.forward(&x, &mask, Direction::Backward).unwrap()
+        let lstm = Lstm::new(&p, "l", i, h).unwrap();
+        let x = p.uniform("x", &[b, t, i], 1.0).unwrap();
+        let mut m = vec![1f32; b * t];
+        m[t + 4..2 * t].fill(0.0); // second sequence: 4 valid frames
+        let mask = Tensor::from_vec(m, (b, t), &Device::Cpu).unwrap();
+        let weights = Tensor::from_vec(
+            (0..b * t * h)
+                .map(|k| ((k * 37) % 11) as f32 / 11.0 - 0.4)
+                .collect::<Vec<_>>(),
+            (b, t, h),
+            &Device::Cpu,
+        )
+        .unwrap();
+        for dir in [Direction::Forward, Direction::Backward] {
+            let grads = |version: usize| {
+                let y = match version {
+                    0 => lstm.forward(&x, &mask, dir),
+                    1 => lstm.forward_graph(&x, &mask, dir),
+                    _ => lstm.forward_naive(&x, &mask, dir),
+                }
+                .unwrap();
+                // A weighted sum of squares so that every output matters differently.
+                let loss = (y.sqr().unwrap() * &weights).unwrap().sum_all().unwrap();
+                let g = loss.backward().unwrap();
+                p.vars()
+                    .iter()
+                    .map(|(name, v)| {
+                        let values = g
+                            .get(v.as_tensor())
+                            .unwrap()
+                            .flatten_all()
+                            .unwrap()
+                            .to_vec1::<f32>()
+                            .unwrap();
+                        (name.clone(), values)
+                    })
+                    .collect::<Vec<_>>()
             };
-            let g = y.sqr().unwrap().sum_all().unwrap().backward().unwrap();
-            g.get(w.as_tensor())
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap()
-        };
-        let (a, b) = (grad(false), grad(true));
-        assert!(a.iter().any(|v| v.abs() > 1e-4));
-        for (x, y) in a.iter().zip(&b) {
-            assert!((x - y).abs() < 1e-5);
+            let (op, graph, naive) = (grads(0), grads(1), grads(2));
+            for ((name, a), ((_, g), (_, n))) in op.iter().zip(graph.iter().zip(&naive)) {
+                assert!(a.iter().any(|v| v.abs() > 1e-4), "{dir:?} {name}: all zero");
+                for (k, ((x, y), z)) in a.iter().zip(g).zip(n).enumerate() {
+                    assert!(
+                        (x - y).abs() < 1e-5,
+                        "{dir:?} {name}[{k}]: op {x} graph {y}"
+                    );
+                    assert!(
+                        (x - z).abs() < 1e-5,
+                        "{dir:?} {name}[{k}]: op {x} naive {z}"
+                    );
+                }
+            }
         }
     }
 

@@ -142,6 +142,18 @@ impl Table {
     }
 }
 
+/// A Markdown table's header line and rule: `first` over the row names, then
+/// one column per entry of `columns`.
+fn header_row(md: &mut String, first: &str, columns: impl Iterator<Item = String>) {
+    let mut header = format!("| {first} |");
+    let mut rule = String::from("|---|");
+    for c in columns {
+        let _ = write!(header, " {c} |");
+        rule.push_str("---|");
+    }
+    let _ = writeln!(md, "{header}\n{rule}");
+}
+
 /// One model's prediction errors: a row per condition, a column per class.
 fn prediction_table(md: &mut String, m: &str, actor: &str, row_cells: &[&TableCell]) {
     if row_cells.iter().all(|c| !c.predict.contains_key(m)) {
@@ -151,17 +163,13 @@ fn prediction_table(md: &mut String, m: &str, actor: &str, row_cells: &[&TableCe
         md,
         "## Prediction error, {m}, test actor {actor} (Euler, rad; 100 / 200 / 400 ms)\n"
     );
-    let mut header = String::from("| condition |");
-    let mut rule = String::from("|---|");
-    for c in row_cells {
-        let _ = write!(
-            header,
-            " {} ({}/{} clips) |",
-            c.class, c.train_clips, c.test_clips
-        );
-        rule.push_str("---|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
+    header_row(
+        md,
+        "condition",
+        row_cells
+            .iter()
+            .map(|c| format!("{} ({}/{} clips)", c.class, c.train_clips, c.test_clips)),
+    );
     let made = |cond: &str| {
         row_cells
             .iter()
@@ -262,14 +270,13 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
         md,
         "## Prediction error, {m}, over test actors and seeds: mean +- sd (Euler, rad; 100 / 200 / 400 ms)\n"
     );
-    let mut header = String::from("| condition |");
-    let mut rule = String::from("|---|");
-    for (class, cells) in &by_class {
-        let n = runs(cells, m, "no_aug").len();
-        let _ = write!(header, " {class} (n = {n}) |");
-        rule.push_str("---|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
+    header_row(
+        md,
+        "condition",
+        by_class
+            .iter()
+            .map(|(class, cells)| format!("{class} (n = {})", runs(cells, m, "no_aug").len())),
+    );
     // (class, condition) -> mean per horizon, for the ranking below.
     let mut means: BTreeMap<(&str, &str), Vec<f64>> = BTreeMap::new();
     for cond in &conditions {
@@ -332,13 +339,11 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
         md,
         "Paired differences, {full} minus each row, over the same (test actor, seed) runs: mean +- sd; * where |mean| > 2 sd / sqrt(n) (the difference exceeds the spread):\n"
     );
-    let mut header = String::from("| minus |");
-    let mut rule = String::from("|---|");
-    for (class, _) in &by_class {
-        let _ = write!(header, " {class} |");
-        rule.push_str("---|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
+    header_row(
+        md,
+        "minus",
+        by_class.iter().map(|(class, _)| class.to_string()),
+    );
     for other in &others {
         let mut line = format!("| {other} |");
         for (_, cells) in &by_class {
@@ -380,13 +385,7 @@ fn set_table(
     show: impl Fn(&SynthScores) -> String,
 ) {
     let _ = writeln!(md, "## {title}\n");
-    let mut header = String::from("| set |");
-    let mut rule = String::from("|---|");
-    for c in cells {
-        let _ = write!(header, " {} |", c.class);
-        rule.push_str("---|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
+    header_row(md, "set", cells.iter().map(|c| c.class.clone()));
     let mut names: Vec<&String> = cells.iter().flat_map(|c| c.synth.keys()).collect();
     names.sort();
     names.dedup();
