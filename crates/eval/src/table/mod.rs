@@ -125,7 +125,7 @@ pub struct TableConfig {
     pub noise_sigma_deg: f64,
     /// VAE training iterations per class and fold (default 1,500, the vae
     /// crate's: with 300 the correction accepted 2 of kick's 46 VAE samples,
-    /// with 1,500 it accepted 8; a class trains in 7-18 min on one loaded
+    /// with 1,500 it accepted 8; a class trains in 6-27 min on one loaded
     /// core, see the vae crate's README).
     pub vae_iterations: u64,
     /// Also train the VAE without discriminators (synthesis metrics only).
