@@ -31,7 +31,6 @@ pub enum Direction {
 pub struct Lstm {
     w_ih_t: Tensor,
     w_hh: Tensor,
-    w_hh_t: Tensor,
     bias: Tensor,
     hidden: usize,
 }
@@ -48,7 +47,6 @@ impl Lstm {
         let bias = p.values(&format!("{name}.bias"), &[4 * hidden], b)?;
         Ok(Lstm {
             w_ih_t: w_ih.t()?,
-            w_hh_t: w_hh.t()?,
             w_hh,
             bias,
             hidden,
@@ -134,6 +132,7 @@ impl Lstm {
         input_gates: impl Fn(usize) -> Result<Tensor>,
     ) -> Result<Tensor> {
         let hsz = self.hidden;
+        let w_hh_t = self.w_hh.t()?;
         let dev = self.bias.device();
         let mut h = Tensor::zeros((b, hsz), self.bias.dtype(), dev)?;
         let mut c = h.clone();
@@ -143,7 +142,7 @@ impl Lstm {
             Direction::Backward => (0..t).rev().collect(),
         };
         for step in order {
-            let gates = (input_gates(step)? + h.matmul(&self.w_hh_t)?)?;
+            let gates = (input_gates(step)? + h.matmul(&w_hh_t)?)?;
             let sig = candle_nn::ops::sigmoid(&gates)?;
             let i = sig.narrow(D::Minus1, 0, hsz)?;
             let f = sig.narrow(D::Minus1, hsz, hsz)?;

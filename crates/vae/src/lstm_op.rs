@@ -44,7 +44,6 @@ pub(crate) struct Trace {
     /// `tanh` of the new cell state.
     tanh_c: Vec<f32>,
     h_prev: Vec<f32>,
-    out: Vec<f32>,
 }
 
 fn sigmoid(v: f32) -> f32 {
@@ -103,8 +102,9 @@ impl Recurrence {
         Ok(())
     }
 
-    /// Runs the recurrence; `w_t` is `W_hh^T` `(H, 4H)`.
-    fn trace(&self, proj: &[f32], w_t: &Tensor) -> candle_core::Result<Trace> {
+    /// Runs the recurrence; `w_t` is `W_hh^T` `(H, 4H)`. Returns the states
+    /// and the output `h`, time-major `(T, B, H)`.
+    fn trace(&self, proj: &[f32], w_t: &Tensor) -> candle_core::Result<(Trace, Vec<f32>)> {
         let (t, b, h) = (self.steps, self.batch, self.hidden);
         let g4 = 4 * h;
         let mut tr = Trace {
@@ -112,8 +112,8 @@ impl Recurrence {
             c_prev: vec![0.0; t * b * h],
             tanh_c: vec![0.0; t * b * h],
             h_prev: vec![0.0; t * b * h],
-            out: vec![0.0; t * b * h],
         };
+        let mut out = vec![0.0; t * b * h];
         let mut hs = vec![0.0f32; b * h];
         let mut cs = vec![0.0f32; b * h];
         for step in self.order() {
@@ -144,9 +144,9 @@ impl Recurrence {
                     hs[idx] += m * (h_new - hs[idx]);
                 }
             }
-            tr.out[s..s + b * h].copy_from_slice(&hs);
+            out[s..s + b * h].copy_from_slice(&hs);
         }
-        Ok(tr)
+        Ok((tr, out))
     }
 }
 
@@ -166,8 +166,7 @@ impl CustomOp2 for Recurrence {
         let w = contiguous(s2, l2, "W_hh")?;
         self.check(proj.len(), w.len())?;
         let w_t = Tensor::from_slice(w, (4 * self.hidden, self.hidden), &Device::Cpu)?.t()?;
-        let mut tr = self.trace(proj, &w_t)?;
-        let out = std::mem::take(&mut tr.out);
+        let (tr, out) = self.trace(proj, &w_t)?;
         if let Ok(mut keep) = self.trace.lock() {
             *keep = Some(tr);
         }
@@ -193,7 +192,7 @@ impl CustomOp2 for Recurrence {
             None => {
                 let proj_v = proj.flatten_all()?.to_vec1::<f32>()?;
                 self.check(proj_v.len(), w_c.elem_count())?;
-                self.trace(&proj_v, &w_c.t()?)?
+                self.trace(&proj_v, &w_c.t()?)?.0
             }
         };
         let grad = grad_res.flatten_all()?.to_vec1::<f32>()?;
