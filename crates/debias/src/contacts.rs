@@ -13,7 +13,13 @@
 //!   (the ankle, the joints below it and their end sites) is within
 //!   `height_band_m` of that foot's planted height (the 5th percentile of its
 //!   lowest point over the clip) and its ankle moves slower than
-//!   `max_speed_m_s` horizontally.
+//!   `max_speed_m_s` horizontally; with `metric_contacts` (the default), also
+//!   wherever the foot skating metric ([`motion::metrics::foot_contacts`])
+//!   sees one of its sole points touching the ground. Why both: a foot
+//!   rolling onto its toes (push-off) moves its ankle faster than
+//!   `max_speed_m_s` while its toes stay on the floor; left to the network,
+//!   those toes slid, and debiasing raised the skating of corrected IK grabs
+//!   and kicks from 0.03-0.05 to 0.16-0.20 m/s (session 13).
 //! * In planted frames the leg is solved with the two-bone IK of the synthesis
 //!   crate (`synth::ik::limb`, joint limits respected) so the ankle reaches the
 //!   corrected clip's ankle, the foot takes the corrected clip's world
@@ -28,12 +34,24 @@
 //!   PD-residual root force keeps it balanced), so the corrected clip's toes
 //!   hang 5-9 cm above the floor while the character stands (grab: 47 % of
 //!   frames "floating"); the heel is not a point of the file's skeleton.
+//!   Only a foot standing still is pitched (every point of the corrected
+//!   clip's foot slower than `still_speed_m_s`, acceptance's "planted"), with
+//!   the same ramp: a foot pivoting on its heel or landing, pitched onto the
+//!   floor, would slide its toes along it (corrected IK grabs: skating 0.031
+//!   -> 0.042 m/s when every planted frame was pitched).
+//! * With `lift_lowered_feet`, a foot the corrected clip has not planted is
+//!   never left lower than the corrected clip has it, within `clearance_m`
+//!   of the floor: the network's leg rotations can otherwise push a swinging
+//!   foot into the floor or skim it along it (corrected IK grabs: toes 8 cm
+//!   under the floor at the end of a clip; skating 0.029 m/s corrected ->
+//!   0.21 m/s debiased, 0.031 lifted).
 //!
 //! The root is not touched here: the debiased clip already carries the
 //! corrected clip's root path (see [`crate::features::apply_rotations`]).
 
 use motion::Motion;
 use motion::glam::{DQuat, DVec3};
+use motion::metrics::{FootContacts, Thresholds, foot_contacts};
 use motion::skeleton::Transform;
 use serde::{Deserialize, Serialize};
 use synth::ik::limb::{EffectorOrientation, Limb, SolveOptions, solve_frame};
@@ -54,6 +72,19 @@ pub struct ContactConfig {
     pub blend_s: f64,
     /// Pitch planted feet down onto the learnt sole height (see the module docs).
     pub flatten_soles: bool,
+    /// Also treat a foot as planted wherever the foot skating metric sees one
+    /// of its sole points in contact (see the module docs).
+    pub metric_contacts: bool,
+    /// Where the corrected clip has not planted a foot, never leave it lower
+    /// than the corrected clip has it once it is within `clearance_m` of the
+    /// floor: lift it back with the leg IK (see the module docs).
+    pub lift_lowered_feet: bool,
+    /// Height above the planted height under which `lift_lowered_feet` acts
+    /// (the foot skating metric's contact height).
+    pub clearance_m: f64,
+    /// A planted foot is pitched onto the sole height only where every point
+    /// of it moves slower than this (3D) in the corrected clip.
+    pub still_speed_m_s: f64,
 }
 
 impl Default for ContactConfig {
@@ -64,6 +95,10 @@ impl Default for ContactConfig {
             max_speed_m_s: 0.5,
             blend_s: 0.1,
             flatten_soles: true,
+            metric_contacts: true,
+            lift_lowered_feet: true,
+            clearance_m: 0.1,
+            still_speed_m_s: 0.2,
         }
     }
 }
@@ -71,10 +106,15 @@ impl Default for ContactConfig {
 impl ContactConfig {
     pub fn validate(&self) -> Result<()> {
         let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(self.height_band_m) || !positive(self.max_speed_m_s) {
+        if !positive(self.height_band_m)
+            || !positive(self.max_speed_m_s)
+            || !positive(self.clearance_m)
+            || !positive(self.still_speed_m_s)
+        {
             return Err(DebiasError::Config(format!(
-                "contact height_band_m {} and max_speed_m_s {} must be positive",
-                self.height_band_m, self.max_speed_m_s
+                "contact height_band_m {}, max_speed_m_s {}, clearance_m {} and still_speed_m_s {} \
+                 must be positive",
+                self.height_band_m, self.max_speed_m_s, self.clearance_m, self.still_speed_m_s
             )));
         }
         if !(self.blend_s.is_finite() && self.blend_s >= 0.0) {
@@ -98,6 +138,10 @@ pub struct ContactReport {
     pub max_ankle_error_m: f64,
     /// Planted (foot, frame) pairs pitched down onto the sole height.
     pub flattened: usize,
+    /// Unplanted (foot, frame) pairs the network had lowered towards the
+    /// floor, lifted back.
+    #[serde(default)]
+    pub lifted: usize,
 }
 
 /// A leg: its IK chain and the joints of its foot (the ankle and everything below).
@@ -147,12 +191,15 @@ fn lowest(motion: &Motion, x: &[Transform], foot: &[usize]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Per frame, is the leg's foot planted in `frames` (world transforms of a clip)?
+/// Per frame, is the leg's foot planted in `frames` (world transforms of
+/// `motion`)? `metric` is the foot skating metric's contacts of `motion`
+/// (`None`: the height-and-speed rule alone).
 fn planted(
     motion: &Motion,
     frames: &[Vec<Transform>],
     leg: &Leg,
     config: &ContactConfig,
+    metric: Option<&FootContacts>,
 ) -> Vec<bool> {
     let n = frames.len();
     if n == 0 {
@@ -162,12 +209,10 @@ fn planted(
         .iter()
         .map(|x| lowest(motion, x, &leg.foot))
         .collect();
-    let mut sorted = heights.clone();
-    sorted.sort_by(f64::total_cmp);
-    let floor = sorted[(n - 1) * 5 / 100];
+    let floor = planted_height(&heights);
     let ankle = leg.limb.effector;
     let horizontal = |v: DVec3| DVec3::new(v.x, 0.0, v.z).length();
-    (0..n)
+    let mut out: Vec<bool> = (0..n)
         .map(|t| {
             let (a, b) = if t + 1 < n {
                 (t, t + 1)
@@ -182,7 +227,59 @@ fn planted(
             };
             heights[t] <= floor + config.height_band_m && speed <= config.max_speed_m_s
         })
+        .collect();
+    if let Some(metric) = metric {
+        let np = metric.points.len();
+        let mine: Vec<usize> = (0..np)
+            .filter(|&i| leg.foot.contains(&metric.points[i].0))
+            .collect();
+        for (step, speeds) in metric.steps.chunks(np.max(1)).enumerate() {
+            if mine.iter().any(|&i| speeds[i].is_some()) {
+                out[step] = true;
+                if step + 1 < n {
+                    out[step + 1] = true;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Per frame, does every point of the leg's foot move slower than `speed`
+/// (m/s, 3D, forward differences; the last frame takes the step before it)?
+fn standing_still(motion: &Motion, frames: &[Vec<Transform>], leg: &Leg, speed: f64) -> Vec<bool> {
+    let n = frames.len();
+    let points: Vec<Vec<DVec3>> = frames
+        .iter()
+        .map(|x| foot_points(motion, x, &leg.foot).collect())
+        .collect();
+    (0..n)
+        .map(|t| {
+            if n < 2 {
+                return true;
+            }
+            let (a, b) = if t + 1 < n { (t, t + 1) } else { (t - 1, t) };
+            points[a]
+                .iter()
+                .zip(&points[b])
+                .all(|(p, q)| (*q - *p).length() * motion.fps() < speed)
+        })
         .collect()
+}
+
+/// Where a foot stands when planted: the 5th percentile of the heights of its
+/// lowest point over a clip (`heights`, one per frame, not empty).
+fn planted_height(heights: &[f64]) -> f64 {
+    let mut sorted = heights.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[(sorted.len() - 1) * 5 / 100]
+}
+
+/// The foot skating metric's contacts of `motion` when `config` asks for them.
+fn metric_contacts(motion: &Motion, config: &ContactConfig) -> Option<FootContacts> {
+    config
+        .metric_contacts
+        .then(|| foot_contacts(motion, &Thresholds::default()))
 }
 
 /// Edit weight per frame: 1 in contact, ramping down linearly over `ramp` frames.
@@ -231,8 +328,9 @@ pub fn sole_height(clips: &[&Motion], config: &ContactConfig) -> Option<f64> {
         if frames.is_empty() {
             continue;
         }
+        let metric = metric_contacts(clip, config);
         for leg in legs(clip, &frames) {
-            let contact = planted(clip, &frames, &leg, config);
+            let contact = planted(clip, &frames, &leg, config, metric.as_ref());
             for (x, c) in frames.iter().zip(contact) {
                 if c {
                     heights.push(lowest(clip, x, &leg.foot));
@@ -336,18 +434,35 @@ pub fn restore(
         return Ok((debiased.clone(), report));
     }
     let ramp = (config.blend_s * corrected.fps()).round() as usize;
-    let leg_weights: Vec<(Vec<bool>, Vec<f64>)> = legs
+    let metric = metric_contacts(corrected, config);
+    let leg_weights: Vec<(Vec<bool>, Vec<f64>, Vec<f64>)> = legs
         .iter()
         .map(|leg| {
-            let c = planted(corrected, &reference, leg, config);
+            let c = planted(corrected, &reference, leg, config, metric.as_ref());
             let w = weights(&c, ramp);
-            (c, w)
+            let still = standing_still(corrected, &reference, leg, config.still_speed_m_s);
+            let flat: Vec<bool> = c.iter().zip(&still).map(|(c, s)| *c && *s).collect();
+            (c, w, weights(&flat, ramp))
         })
         .collect();
     report.planted = leg_weights
         .iter()
-        .map(|(c, _)| c.iter().filter(|p| **p).count())
+        .map(|(c, _, _)| c.iter().filter(|p| **p).count())
         .sum();
+    // Per leg and frame, the lowest a foot the corrected clip has not planted
+    // may go: where the corrected clip has it, up to `clearance_m` above its
+    // planted height (see `lift_lowered_feet`).
+    let floors: Vec<Vec<f64>> = legs
+        .iter()
+        .map(|leg| {
+            let heights: Vec<f64> = reference
+                .iter()
+                .map(|x| lowest(corrected, x, &leg.foot))
+                .collect();
+            let top = planted_height(&heights) + config.clearance_m;
+            heights.iter().map(|h| h.min(top)).collect()
+        })
+        .collect();
 
     let skeleton = debiased.skeleton();
     let nj = debiased.joints();
@@ -357,44 +472,61 @@ pub fn restore(
         let root = debiased.root_translation()[t];
         let original = debiased.pose(t).to_vec();
         let mut pose = original.clone();
-        for (leg, (contact, w)) in legs.iter().zip(&leg_weights) {
-            let w = w[t];
-            if w <= 0.0 {
-                continue;
-            }
-            let ankle = leg.limb.effector;
-            let target_x = &reference[t];
-            world(debiased, root, &pose, &mut x);
-            let target = x[ankle].translation.lerp(target_x[ankle].translation, w);
-            let options = SolveOptions {
-                orientation: EffectorOrientation::World,
-                respect_limits: true,
-            };
-            solve_frame(
-                skeleton, &leg.limb, &x, &mut pose, &original, target, options,
-            );
-            world(debiased, root, &pose, &mut x);
-            let parent = skeleton.parent(ankle).unwrap_or(0);
-            let want = x[ankle].rotation.slerp(target_x[ankle].rotation, w);
-            pose[ankle] = (x[parent].rotation.inverse() * want).normalize();
-            for &j in &leg.foot[1..] {
-                pose[j] = pose[j].slerp(corrected.rotation(t, j), w).normalize();
-            }
-            if let (true, Some(target)) = (config.flatten_soles, sole_height_m) {
+        for ((leg, (contact, w, flat)), floor) in legs.iter().zip(&leg_weights).zip(&floors) {
+            let (w, flat) = (w[t], flat[t]);
+            if w > 0.0 {
+                let ankle = leg.limb.effector;
+                let target_x = &reference[t];
                 world(debiased, root, &pose, &mut x);
-                let (axis, theta) = pitch_to(debiased, &x, leg, target);
-                if theta > 0.0 {
-                    let turned = DQuat::from_axis_angle(axis, w * theta) * x[ankle].rotation;
-                    pose[ankle] = (x[parent].rotation.inverse() * turned).normalize();
-                    if contact[t] {
-                        report.flattened += 1;
+                let target = x[ankle].translation.lerp(target_x[ankle].translation, w);
+                let options = SolveOptions {
+                    orientation: EffectorOrientation::World,
+                    respect_limits: true,
+                };
+                solve_frame(
+                    skeleton, &leg.limb, &x, &mut pose, &original, target, options,
+                );
+                world(debiased, root, &pose, &mut x);
+                let parent = skeleton.parent(ankle).unwrap_or(0);
+                let want = x[ankle].rotation.slerp(target_x[ankle].rotation, w);
+                pose[ankle] = (x[parent].rotation.inverse() * want).normalize();
+                for &j in &leg.foot[1..] {
+                    pose[j] = pose[j].slerp(corrected.rotation(t, j), w).normalize();
+                }
+                if let (true, Some(target), true) =
+                    (config.flatten_soles, sole_height_m, flat > 0.0)
+                {
+                    world(debiased, root, &pose, &mut x);
+                    let (axis, theta) = pitch_to(debiased, &x, leg, target);
+                    if theta > 0.0 {
+                        let turned = DQuat::from_axis_angle(axis, flat * theta) * x[ankle].rotation;
+                        pose[ankle] = (x[parent].rotation.inverse() * turned).normalize();
+                        if contact[t] {
+                            report.flattened += 1;
+                        }
                     }
                 }
+                if contact[t] {
+                    world(debiased, root, &pose, &mut x);
+                    let e = (x[ankle].translation - target_x[ankle].translation).length();
+                    report.max_ankle_error_m = report.max_ankle_error_m.max(e);
+                }
             }
-            if contact[t] {
+            if config.lift_lowered_feet && !contact[t] {
                 world(debiased, root, &pose, &mut x);
-                let e = (x[ankle].translation - target_x[ankle].translation).length();
-                report.max_ankle_error_m = report.max_ankle_error_m.max(e);
+                let lift = floor[t] - lowest(debiased, &x, &leg.foot);
+                if lift > 1e-4 {
+                    let ankle = leg.limb.effector;
+                    let target = x[ankle].translation + DVec3::Y * lift;
+                    let options = SolveOptions {
+                        orientation: EffectorOrientation::World,
+                        respect_limits: true,
+                    };
+                    solve_frame(
+                        skeleton, &leg.limb, &x, &mut pose, &original, target, options,
+                    );
+                    report.lifted += 1;
+                }
             }
         }
         rotations.extend(pose);
@@ -471,7 +603,7 @@ mod tests {
             .map(|t| corrected.world_transforms(t))
             .collect();
         let leg = &legs(&corrected, &reference)[0];
-        let contact = planted(&corrected, &reference, leg, &ContactConfig::default());
+        let contact = planted(&corrected, &reference, leg, &ContactConfig::default(), None);
         let t = contact.iter().position(|c| *c).expect("a planted frame");
         let ankle = leg.limb.effector;
         assert!(ankle_error(&edited, &corrected, t, ankle) > 0.02);
@@ -486,6 +618,98 @@ mod tests {
         for t in 0..corrected.frames() {
             assert_eq!(restored.rotation(t, head), edited.rotation(t, head));
         }
+    }
+
+    /// Largest difference, over the steps where `corrected`'s sole points
+    /// touch the ground (the skating metric's rule), between the horizontal
+    /// speeds of the same points in `corrected` and in `other`.
+    fn contact_speed_change(corrected: &Motion, other: &Motion) -> f64 {
+        let th = Thresholds::default();
+        let c = foot_contacts(corrected, &th);
+        let np = c.points.len();
+        let speed = |m: &Motion, t: usize, i: usize| {
+            let (j, end) = c.points[i];
+            let at = |t: usize| {
+                let x = m.world_transforms(t);
+                match (end, m.skeleton().joint(j).end_site) {
+                    (true, Some(e)) => x[j].translation + x[j].rotation * e,
+                    _ => x[j].translation,
+                }
+            };
+            let v = (at(t + 1) - at(t)) * m.fps();
+            DVec3::new(v.x, 0.0, v.z).length()
+        };
+        let mut worst: f64 = 0.0;
+        for (t, steps) in c.steps.chunks(np).enumerate() {
+            for (i, s) in steps.iter().enumerate() {
+                if s.is_some() {
+                    worst = worst.max((speed(other, t, i) - speed(corrected, t, i)).abs());
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn soles_touching_the_ground_keep_the_corrected_clips_speed() {
+        let corrected = walk();
+        let edited = bent_knees(&corrected, 0.3);
+        assert!(
+            contact_speed_change(&corrected, &edited) > 0.05,
+            "bending the knees moves the soles in contact"
+        );
+        let (restored, _) =
+            restore(&edited, &corrected, &ContactConfig::default(), None).expect("restore");
+        let change = contact_speed_change(&corrected, &restored);
+        assert!(change < 0.02, "contact speeds changed by {change} m/s");
+    }
+
+    #[test]
+    fn feet_the_network_lowers_towards_the_floor_are_lifted_back() {
+        let corrected = walk();
+        let config = ContactConfig::default();
+        let reference: Vec<_> = (0..corrected.frames())
+            .map(|t| corrected.world_transforms(t))
+            .collect();
+        let metric = metric_contacts(&corrected, &config);
+        // Straightening the knees lowers the feet where the corrected clip
+        // swings them with bent knees.
+        let edited = bent_knees(&corrected, -0.3);
+        // (lowest of `m`, lowest of the corrected clip) per unplanted frame
+        // where the corrected foot is within the clearance.
+        let dips = |m: &Motion| -> Vec<(f64, f64)> {
+            let mut out = Vec::new();
+            for leg in legs(&corrected, &reference) {
+                let c = planted(&corrected, &reference, &leg, &config, metric.as_ref());
+                let heights: Vec<f64> = reference
+                    .iter()
+                    .map(|x| lowest(&corrected, x, &leg.foot))
+                    .collect();
+                let top = planted_height(&heights) + config.clearance_m;
+                for t in 0..corrected.frames() {
+                    if !c[t] && heights[t] < top {
+                        out.push((lowest(m, &m.world_transforms(t), &leg.foot), heights[t]));
+                    }
+                }
+            }
+            out
+        };
+        let before = dips(&edited);
+        assert!(
+            before.iter().any(|(m, c)| m < &(c - 0.02)),
+            "the edit lowers unplanted feet: {before:?}"
+        );
+        let (lifted, report) = restore(&edited, &corrected, &config, None).expect("restore");
+        assert!(report.lifted > 0, "{report:?}");
+        for (m, c) in dips(&lifted) {
+            assert!(m > c - 2e-3, "foot at {m} under the corrected clip's {c}");
+        }
+        let off = ContactConfig {
+            lift_lowered_feet: false,
+            ..config
+        };
+        let (_, r) = restore(&edited, &corrected, &off, None).expect("restore");
+        assert_eq!(r.lifted, 0);
     }
 
     /// `m` with both feet pitched toes-up by `angle` (world, about the lateral axis).
@@ -508,14 +732,18 @@ mod tests {
             .expect("motion")
     }
 
-    /// Highest lowest-foot-point of `m` over the frames where `by` plants that foot.
+    /// Highest lowest-foot-point of `m` over the frames where `by` plants that
+    /// foot and it stands still (the frames flattening pitches).
     fn lowest_planted(m: &Motion, by: &Motion, config: &ContactConfig) -> f64 {
         let frames: Vec<_> = (0..m.frames()).map(|t| m.world_transforms(t)).collect();
         let by_frames: Vec<_> = (0..by.frames()).map(|t| by.world_transforms(t)).collect();
         let mut worst = f64::NEG_INFINITY;
+        let metric = metric_contacts(by, config);
         for leg in legs(by, &by_frames) {
-            for (x, c) in frames.iter().zip(planted(by, &by_frames, &leg, config)) {
-                if c {
+            let contact = planted(by, &by_frames, &leg, config, metric.as_ref());
+            let still = standing_still(by, &by_frames, &leg, config.still_speed_m_s);
+            for ((x, c), s) in frames.iter().zip(contact).zip(still) {
+                if c && s {
                     worst = worst.max(lowest(m, x, &leg.foot));
                 }
             }

@@ -395,6 +395,13 @@ pub mod bounds {
         "metres per second",
     );
     pub const DEBIAS_BLEND_S: Bound = bound("debias", "contacts.blend_s", 10.0, "seconds");
+    pub const DEBIAS_CLEARANCE_M: Bound = bound("debias", "contacts.clearance_m", 1.0, "metres");
+    pub const DEBIAS_STILL_SPEED: Bound = bound(
+        "debias",
+        "contacts.still_speed_m_s",
+        10.0,
+        "metres per second",
+    );
 
     /// Every bound above (for documentation and the service's limits endpoint).
     pub const ALL: &[Bound] = &[
@@ -414,6 +421,8 @@ pub mod bounds {
         DEBIAS_HEIGHT_BAND_M,
         DEBIAS_MAX_SPEED,
         DEBIAS_BLEND_S,
+        DEBIAS_CLEARANCE_M,
+        DEBIAS_STILL_SPEED,
     ];
 }
 
@@ -614,6 +623,8 @@ impl Recipe {
             bounds::DEBIAS_HEIGHT_BAND_M.check(d.contacts.height_band_m)?;
             bounds::DEBIAS_MAX_SPEED.check(d.contacts.max_speed_m_s)?;
             bounds::DEBIAS_BLEND_S.check(d.contacts.blend_s)?;
+            bounds::DEBIAS_CLEARANCE_M.check(d.contacts.clearance_m)?;
+            bounds::DEBIAS_STILL_SPEED.check(d.contacts.still_speed_m_s)?;
         }
         Ok(self)
     }

@@ -674,7 +674,7 @@ fn numeric_recipe_fields_have_upper_bounds() {
          [debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 16);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 18);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.

@@ -47,6 +47,11 @@ enum What {
         /// corrected originals; saved with the model).
         #[arg(long)]
         no_flatten_soles: bool,
+        /// Restore feet only where the height-and-speed rule plants them, not
+        /// also where the foot skating metric sees their soles on the ground
+        /// (an ablation; saved with the model).
+        #[arg(long)]
+        no_metric_contacts: bool,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -74,10 +79,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             seed,
             no_contacts,
             no_flatten_soles,
+            no_metric_contacts,
         } => {
             let contacts = debias::ContactConfig {
                 restore: !no_contacts,
                 flatten_soles: !no_flatten_soles,
+                metric_contacts: !no_metric_contacts,
                 ..debias::ContactConfig::default()
             };
             train(&pairs, &clip, &out, iterations, hidden, seed, contacts)
