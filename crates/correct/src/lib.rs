@@ -16,6 +16,42 @@
 //!   reference frames), trained on many clips; every clip's correction starts
 //!   from it (`[correct] policy = "class"`, `bench correction --tracker-clips`).
 //!
+//! ## Session 14 (2026-12-04): deposit from a tracker on every clip, and the best judged tracker kept
+//!
+//! `motionaug bench correction --data ../shared/data/hdm05 --classes deposit
+//! --tracker-clips 32 --tracker-budget 3600 --per-class 100 --max-iterations
+//! 15 --threads 1 --out DIR` (one core; the other ran an eval table): the
+//! tracker trained on all 32 deposits for 3600 s (2,693 PPO iterations),
+//! judged every 5 iterations. Clips accepted as is, per 300 iterations
+//! (min / max / mean of the judgements):
+//!
+//! | iterations | 0-300 | 300-600 | 600-900 | 900-1200 | 1200-1500 | 1500-1800 | 1800-2100 | 2100-2400 | 2400-2700 |
+//! |---|---|---|---|---|---|---|---|---|---|
+//! | accepted / 32 | 0-15 (6.6) | 14-24 (20.9) | 20-28 (24.0) | 22-29 (24.8) | 21-29 (25.5) | 21-28 (25.4) | 23-29 (25.7) | 21-28 (24.7) | 22-29 (26.3) |
+//!
+//! From iteration ~900 the count swings between 21 and 29 from one
+//! judgement to the next. This run's binary kept the last tracker, which
+//! passed 22 clips as is; the best judged one (iteration 1,170, and again at
+//! 1,480, 1,845, 2,400, 2,440) passed 29 of 32 (91 %). From the last
+//! tracker, after fine-tuning the 10 clips it failed (15 PPO iterations
+//! each, 116 s for the class): **28 of 32 accepted** (88 %; session 11: 20
+//! of 32 from a 10-clip, 150-iteration tracker, 25 at 300). Rejected: 2
+//! falls, 4 with the output skating above the input's (e.g. 0.069 against
+//! 0.067 m/s), 1 soles. Residual force 0.021 m g, skating 0.093 -> 0.035
+//! m/s, soles flat 83 -> 96 % of planted frames; 3,717 s for the class on
+//! one core. Since then the tracker kept is the best judged one
+//! ([`class`]).
+//!
+//! The same command with that binary and the default budget of a recipe's
+//! tracker (`--tracker-budget 1800`; 1,642 iterations): the judgements
+//! follow the first run's exactly (same seed) up to the budget, the last
+//! passes 25 of 32 as is, and the tracker kept is iteration 1,170's (29 of
+//! 32). After fine-tuning the 3 it fails: **30 of 32 deposits accepted (94
+//! %)**; rejected: 1 fall, 1 soles (and it skates). Residual force 0.021 m
+//! g, R_norm 0.919, skating 0.093 -> 0.021 m/s, penetration 2.4 -> 3.5 mm,
+//! floating 2 -> 1 %, soles flat 83 -> 98 %; the clips 38 s in all, 1,838 s
+//! for the class on one core (tracker 1,800 s).
+//!
 //! ## Session 11 (2026-12-03): a sliding term, planted references, throughput one class per core
 //!
 //! Every run: `motionaug bench correction --data ../shared/data/hdm05
