@@ -237,6 +237,7 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
     let mut config = correct::ClassConfig {
         correct: tiny(3),
         judge_every: 2,
+        keep_tolerance: 0.05,
     };
     config.correct.physics.tracker_frames = 2;
 
@@ -257,25 +258,22 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
     // Judged at iteration 2 and again at the end.
     let its: Vec<u64> = report.curve.iter().map(|p| p.iteration).collect();
     assert_eq!(its, vec![2, 3]);
-    // The tracker kept is the best judged one, and its verdicts are reported.
-    let kept = report
+    // The tracker kept is the latest judged one within one clip (5 % of 2
+    // clips, at least one) of the best, and its verdicts are reported.
+    let best = report.curve.iter().map(|p| p.accepted).max().unwrap();
+    let want = report
         .curve
         .iter()
-        .find(|p| p.iteration == report.kept_iteration)
-        .expect("the kept iteration was judged");
-    for p in &report.curve {
-        assert!(
-            (p.accepted, p.mean_r_norm) <= (kept.accepted, kept.mean_r_norm),
-            "{:?} beats the kept {kept:?}",
-            p
-        );
-    }
-    assert_eq!(report.accepted(), kept.accepted);
+        .rev()
+        .find(|p| p.accepted + 1 >= best)
+        .unwrap();
+    assert_eq!(report.kept_iteration, want.iteration, "{:?}", report.curve);
+    assert_eq!(report.accepted(), want.accepted);
     let mean_r_norm = report.verdicts.iter().map(|v| v.r_norm).sum::<f64>() / 2.0;
-    assert!((mean_r_norm - kept.mean_r_norm).abs() < 1e-9);
+    assert!((mean_r_norm - want.mean_r_norm).abs() < 1e-9);
     assert!(
-        !class_dir.join("best").exists(),
-        "the best tracker's scratch folder is removed"
+        !class_dir.join("kept").exists(),
+        "the kept tracker's scratch folder is removed"
     );
     for v in &report.verdicts {
         assert_eq!(v.accepted, v.rejected_because.is_empty(), "{v:?}");
