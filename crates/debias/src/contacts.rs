@@ -191,12 +191,23 @@ fn lowest(motion: &Motion, x: &[Transform], foot: &[usize]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// Per frame, the height of the lowest point of the leg's foot in `frames`
+/// (world transforms of `motion`).
+fn lowest_track(motion: &Motion, frames: &[Vec<Transform>], leg: &Leg) -> Vec<f64> {
+    frames
+        .iter()
+        .map(|x| lowest(motion, x, &leg.foot))
+        .collect()
+}
+
 /// Per frame, is the leg's foot planted in `frames` (world transforms of
-/// `motion`)? `metric` is the foot skating metric's contacts of `motion`
-/// (`None`: the height-and-speed rule alone).
+/// `motion`)? `heights` is the foot's [`lowest_track`]; `metric` the foot
+/// skating metric's contacts of `motion` (`None`: the height-and-speed rule
+/// alone).
 fn planted(
     motion: &Motion,
     frames: &[Vec<Transform>],
+    heights: &[f64],
     leg: &Leg,
     config: &ContactConfig,
     metric: Option<&FootContacts>,
@@ -205,11 +216,7 @@ fn planted(
     if n == 0 {
         return Vec::new();
     }
-    let heights: Vec<f64> = frames
-        .iter()
-        .map(|x| lowest(motion, x, &leg.foot))
-        .collect();
-    let floor = planted_height(&heights);
+    let floor = planted_height(heights);
     let ankle = leg.limb.effector;
     let horizontal = |v: DVec3| DVec3::new(v.x, 0.0, v.z).length();
     let mut out: Vec<bool> = (0..n)
@@ -282,6 +289,18 @@ fn metric_contacts(motion: &Motion, config: &ContactConfig) -> Option<FootContac
         .then(|| foot_contacts(motion, &Thresholds::default()))
 }
 
+/// What restoring does to one leg, per frame of the corrected clip.
+struct LegPlan {
+    /// Planted in the corrected clip.
+    contact: Vec<bool>,
+    /// Weight of the restoring edit.
+    weight: Vec<f64>,
+    /// Weight of the sole flattening (planted and standing still).
+    flat: Vec<f64>,
+    /// Lowest height the foot's lowest point may have where not planted.
+    floor: Vec<f64>,
+}
+
 /// Edit weight per frame: 1 in contact, ramping down linearly over `ramp` frames.
 fn weights(contact: &[bool], ramp: usize) -> Vec<f64> {
     let n = contact.len();
@@ -330,12 +349,15 @@ pub fn sole_height(clips: &[&Motion], config: &ContactConfig) -> Option<f64> {
         }
         let metric = metric_contacts(clip, config);
         for leg in legs(clip, &frames) {
-            let contact = planted(clip, &frames, &leg, config, metric.as_ref());
-            for (x, c) in frames.iter().zip(contact) {
-                if c {
-                    heights.push(lowest(clip, x, &leg.foot));
-                }
-            }
+            let track = lowest_track(clip, &frames, &leg);
+            let contact = planted(clip, &frames, &track, &leg, config, metric.as_ref());
+            heights.extend(
+                track
+                    .iter()
+                    .zip(contact)
+                    .filter(|(_, c)| *c)
+                    .map(|(h, _)| h),
+            );
         }
     }
     if heights.is_empty() {
@@ -435,54 +457,58 @@ pub fn restore(
     }
     let ramp = (config.blend_s * corrected.fps()).round() as usize;
     let metric = metric_contacts(corrected, config);
-    let leg_weights: Vec<(Vec<bool>, Vec<f64>, Vec<f64>)> = legs
+    // Per leg: planted frames, the restoring weight, the flattening weight
+    // (planted and standing still), and per frame the lowest a foot the
+    // corrected clip has not planted may go (where the corrected clip has it,
+    // up to `clearance_m` above its planted height; see `lift_lowered_feet`).
+    let per_leg: Vec<LegPlan> = legs
         .iter()
         .map(|leg| {
-            let c = planted(corrected, &reference, leg, config, metric.as_ref());
-            let w = weights(&c, ramp);
+            let heights = lowest_track(corrected, &reference, leg);
+            let contact = planted(
+                corrected,
+                &reference,
+                &heights,
+                leg,
+                config,
+                metric.as_ref(),
+            );
             let still = standing_still(corrected, &reference, leg, config.still_speed_m_s);
-            let flat: Vec<bool> = c.iter().zip(&still).map(|(c, s)| *c && *s).collect();
-            (c, w, weights(&flat, ramp))
-        })
-        .collect();
-    report.planted = leg_weights
-        .iter()
-        .map(|(c, _, _)| c.iter().filter(|p| **p).count())
-        .sum();
-    // Per leg and frame, the lowest a foot the corrected clip has not planted
-    // may go: where the corrected clip has it, up to `clearance_m` above its
-    // planted height (see `lift_lowered_feet`).
-    let floors: Vec<Vec<f64>> = legs
-        .iter()
-        .map(|leg| {
-            let heights: Vec<f64> = reference
-                .iter()
-                .map(|x| lowest(corrected, x, &leg.foot))
-                .collect();
+            let flat: Vec<bool> = contact.iter().zip(&still).map(|(c, s)| *c && *s).collect();
             let top = planted_height(&heights) + config.clearance_m;
-            heights.iter().map(|h| h.min(top)).collect()
+            LegPlan {
+                weight: weights(&contact, ramp),
+                flat: weights(&flat, ramp),
+                floor: heights.iter().map(|h| h.min(top)).collect(),
+                contact,
+            }
         })
         .collect();
+    report.planted = per_leg
+        .iter()
+        .map(|p| p.contact.iter().filter(|c| **c).count())
+        .sum();
 
     let skeleton = debiased.skeleton();
     let nj = debiased.joints();
+    // Every leg edit keeps the foot's world orientation and the joint limits.
+    let options = SolveOptions {
+        orientation: EffectorOrientation::World,
+        respect_limits: true,
+    };
     let mut rotations = Vec::with_capacity(n * nj);
     let mut x = vec![Transform::IDENTITY; nj];
     for t in 0..n {
         let root = debiased.root_translation()[t];
         let original = debiased.pose(t).to_vec();
         let mut pose = original.clone();
-        for ((leg, (contact, w, flat)), floor) in legs.iter().zip(&leg_weights).zip(&floors) {
-            let (w, flat) = (w[t], flat[t]);
+        for (leg, plan) in legs.iter().zip(&per_leg) {
+            let (w, flat, contact) = (plan.weight[t], plan.flat[t], plan.contact[t]);
             if w > 0.0 {
                 let ankle = leg.limb.effector;
                 let target_x = &reference[t];
                 world(debiased, root, &pose, &mut x);
                 let target = x[ankle].translation.lerp(target_x[ankle].translation, w);
-                let options = SolveOptions {
-                    orientation: EffectorOrientation::World,
-                    respect_limits: true,
-                };
                 solve_frame(
                     skeleton, &leg.limb, &x, &mut pose, &original, target, options,
                 );
@@ -501,27 +527,23 @@ pub fn restore(
                     if theta > 0.0 {
                         let turned = DQuat::from_axis_angle(axis, flat * theta) * x[ankle].rotation;
                         pose[ankle] = (x[parent].rotation.inverse() * turned).normalize();
-                        if contact[t] {
+                        if contact {
                             report.flattened += 1;
                         }
                     }
                 }
-                if contact[t] {
+                if contact {
                     world(debiased, root, &pose, &mut x);
                     let e = (x[ankle].translation - target_x[ankle].translation).length();
                     report.max_ankle_error_m = report.max_ankle_error_m.max(e);
                 }
             }
-            if config.lift_lowered_feet && !contact[t] {
+            if config.lift_lowered_feet && !contact {
                 world(debiased, root, &pose, &mut x);
-                let lift = floor[t] - lowest(debiased, &x, &leg.foot);
+                let lift = plan.floor[t] - lowest(debiased, &x, &leg.foot);
                 if lift > 1e-4 {
                     let ankle = leg.limb.effector;
                     let target = x[ankle].translation + DVec3::Y * lift;
-                    let options = SolveOptions {
-                        orientation: EffectorOrientation::World,
-                        respect_limits: true,
-                    };
                     solve_frame(
                         skeleton, &leg.limb, &x, &mut pose, &original, target, options,
                     );
@@ -603,7 +625,15 @@ mod tests {
             .map(|t| corrected.world_transforms(t))
             .collect();
         let leg = &legs(&corrected, &reference)[0];
-        let contact = planted(&corrected, &reference, leg, &ContactConfig::default(), None);
+        let heights = lowest_track(&corrected, &reference, leg);
+        let contact = planted(
+            &corrected,
+            &reference,
+            &heights,
+            leg,
+            &ContactConfig::default(),
+            None,
+        );
         let t = contact.iter().position(|c| *c).expect("a planted frame");
         let ankle = leg.limb.effector;
         assert!(ankle_error(&edited, &corrected, t, ankle) > 0.02);
@@ -680,11 +710,15 @@ mod tests {
         let dips = |m: &Motion| -> Vec<(f64, f64)> {
             let mut out = Vec::new();
             for leg in legs(&corrected, &reference) {
-                let c = planted(&corrected, &reference, &leg, &config, metric.as_ref());
-                let heights: Vec<f64> = reference
-                    .iter()
-                    .map(|x| lowest(&corrected, x, &leg.foot))
-                    .collect();
+                let heights = lowest_track(&corrected, &reference, &leg);
+                let c = planted(
+                    &corrected,
+                    &reference,
+                    &heights,
+                    &leg,
+                    &config,
+                    metric.as_ref(),
+                );
                 let top = planted_height(&heights) + config.clearance_m;
                 for t in 0..corrected.frames() {
                     if !c[t] && heights[t] < top {
@@ -740,7 +774,8 @@ mod tests {
         let mut worst = f64::NEG_INFINITY;
         let metric = metric_contacts(by, config);
         for leg in legs(by, &by_frames) {
-            let contact = planted(by, &by_frames, &leg, config, metric.as_ref());
+            let heights = lowest_track(by, &by_frames, &leg);
+            let contact = planted(by, &by_frames, &heights, &leg, config, metric.as_ref());
             let still = standing_still(by, &by_frames, &leg, config.still_speed_m_s);
             for ((x, c), s) in frames.iter().zip(contact).zip(still) {
                 if c && s {
