@@ -498,7 +498,7 @@ pub fn restore(
     };
     let mut rotations = Vec::with_capacity(n * nj);
     let mut x = vec![Transform::IDENTITY; nj];
-    for t in 0..n {
+    for (t, target_x) in reference.iter().enumerate() {
         let root = debiased.root_translation()[t];
         let original = debiased.pose(t).to_vec();
         let mut pose = original.clone();
@@ -506,7 +506,6 @@ pub fn restore(
             let (w, flat, contact) = (plan.weight[t], plan.flat[t], plan.contact[t]);
             if w > 0.0 {
                 let ankle = leg.limb.effector;
-                let target_x = &reference[t];
                 world(debiased, root, &pose, &mut x);
                 let target = x[ankle].translation.lerp(target_x[ankle].translation, w);
                 solve_frame(
