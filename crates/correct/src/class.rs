@@ -212,12 +212,11 @@ pub fn train_class(
                 Ok(v) => {
                     let n = v.iter().filter(|v| v.accepted).count();
                     let p = point(it.iteration, it.wall_s, it.samples, &v);
-                    if kept.offer(&p)
+                    if kept.offer(&p, scale, &v)
                         && let Err(e) = trainer.save_checkpoint(&kept_dir, 1)
                     {
                         failure = Some(e.into());
                     }
-                    kept.verdicts_of(&p, scale, &v);
                     curve.push(p);
                     accepted = Some(n);
                     for name in v.iter().flat_map(|v| &v.failed) {
@@ -271,7 +270,7 @@ pub fn train_class(
     }
     let mut kept_iteration = progress.iterations;
     if let Some(last) = curve.last()
-        && !kept.offer(last)
+        && !kept.offer(last, residual_scale, &verdicts)
         && let Some(k) = kept.point
     {
         // The kept tracker becomes the latest checkpoint: every clip's
@@ -343,26 +342,17 @@ impl Kept {
         }
     }
 
-    /// Record judgement `p`; true when it is now the one to keep.
-    fn offer(&mut self, p: &ClassPoint) -> bool {
+    /// Record judgement `p` (judged at residual `scale`, with `verdicts`);
+    /// true when it is now the one to keep.
+    fn offer(&mut self, p: &ClassPoint, scale: f32, verdicts: &[ClipVerdict]) -> bool {
         self.best = self.best.max(p.accepted);
         let keep = p.accepted + self.tolerance >= self.best;
         if keep {
             self.point = Some(p.clone());
-        }
-        keep
-    }
-
-    /// The verdicts of `p`, when `p` is the one kept.
-    fn verdicts_of(&mut self, p: &ClassPoint, scale: f32, verdicts: &[ClipVerdict]) {
-        if self
-            .point
-            .as_ref()
-            .is_some_and(|k| k.iteration == p.iteration)
-        {
             self.residual_scale = scale;
             self.verdicts = verdicts.to_vec();
         }
+        keep
     }
 }
 
@@ -474,7 +464,7 @@ mod tests {
     fn kept(clips: usize, tolerance: f64, counts: &[usize]) -> u64 {
         let mut k = Kept::new(clips, tolerance);
         for (i, &n) in counts.iter().enumerate() {
-            k.offer(&at(i as u64, n));
+            k.offer(&at(i as u64, n), 1.0, &[]);
         }
         k.point.expect("a judgement").iteration
     }
