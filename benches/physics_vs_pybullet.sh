@@ -4,7 +4,7 @@
 # DeepMimic humanoid with stable PD at 1/1200 s (benches/pybullet_deepmimic.py),
 # alternating ROUNDS times so that both see the same machine load.
 #
-#   python3 -m venv /tmp/pyb && /tmp/pyb/bin/pip install pybullet
+#   python3 -m venv /tmp/pyb && /tmp/pyb/bin/pip install pybullet numpy
 #   PYTHON=/tmp/pyb/bin/python bash benches/physics_vs_pybullet.sh [ROUNDS]
 set -euo pipefail
 cd "$(dirname "$0")/.."

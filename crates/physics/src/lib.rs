@@ -34,6 +34,25 @@
 //! DeepMimic humanoid at 1/1200 s (`benches/physics_vs_pybullet.sh 5`):
 //! 43-58x, median 50x (the former default: 15-23x, median 23x). See [`sim`]
 //! for the profile, the table of steps, substeps and passes, and foot skating.
+//!
+//! Session 15 (2026-12-04), a quiet core (`taskset -c 1`, the other core
+//! running a correction), `benches/physics_vs_pybullet.sh 3`: ours 401-416
+//! simulated s per wall s (42 us per physics step), pybullet 8.3-8.6: **48x,
+//! 50x, 48x, median 48x**, short of the 100x. What limits it, from
+//! `perf record` of the same run and rapier 0.36's source: 37 % of the time
+//! is `JointConstraint<f32, 1>::solve`, the *scalar* joint solver, and 4 %
+//! its `finalize_constraints`. Rapier solves joints four at a time (SIMD)
+//! only when (a) the joint has no motor on a free axis
+//! (`GenericJoint::supports_simd_constraints`: in 3-D any motor on an
+//! unlocked axis excludes it) and (b) a colour of body-disjoint joints
+//! holds at least 64 joints (`JOINT_BATCH * LAYOUT_REF_WORKERS / 2`);
+//! our PD motors fail (a) and a 15-joint tree fails (b), so batching many
+//! characters into one world would not reach the SIMD path either. Among the rest:
+//! contacts 5 %, narrow phase 3 %, rapier's stage bookkeeping and copies
+//! 13 %, row rebuilds 4 %, our own environment step 2 %. A 2x from here needs fewer solver
+//! passes (1/60 s with one substep of 10 passes is 1.3x faster but drops the
+//! CMU walk, table in [`sim`]) or a solver other than rapier's; neither is
+//! done.
 
 pub mod bench;
 pub mod character;
