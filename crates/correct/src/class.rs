@@ -191,7 +191,13 @@ pub fn train_class(
     let mut trainer = if has_checkpoint {
         Trainer::new_or_resume(cc.ppo.clone(), tasks, cc.seed, &checkpoints)?.0
     } else {
-        Trainer::new(cc.ppo.clone(), tasks, cc.seed)?
+        let mut trainer = Trainer::new(cc.ppo.clone(), tasks, cc.seed)?;
+        // A tracker of the class's new clips starts from the tracker of its
+        // originals (`ClassReport::warm_config`), never from scratch.
+        if let Some(from) = &cc.warm_start {
+            trainer.warm_start(from)?;
+        }
+        trainer
     };
 
     let schedule = cc.residual_schedule;

@@ -318,6 +318,29 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
         )
         .is_err()
     );
+
+    // A tracker of new clips starts from this one: untrained, it judges the
+    // same clips exactly as the kept tracker did; a fresh one does not.
+    let stage = |warm: bool, name: &str| {
+        let mut base = tiny(0);
+        base.physics.tracker_frames = 2;
+        let correct = if warm {
+            report.warm_config(&base, &class_dir)
+        } else {
+            base
+        };
+        let config = correct::ClassConfig {
+            correct,
+            ..config.clone()
+        };
+        correct::train_class(&clips, &config, &dir.path().join(name), false, |_| {}).unwrap()
+    };
+    let r_norms =
+        |r: &correct::ClassReport| r.verdicts.iter().map(|v| v.r_norm).collect::<Vec<_>>();
+    let warmed = stage(true, "warmed");
+    assert_eq!(warmed.iterations, 0);
+    assert_eq!(r_norms(&warmed), r_norms(&report));
+    assert_ne!(r_norms(&stage(false, "fresh")), r_norms(&report));
 }
 
 /// The layout with a static root above the travelling Hips (six channels

@@ -186,6 +186,17 @@ struct CorrectionArgs {
     /// Correct only clips the tracker was not trained on.
     #[arg(long)]
     held_out: bool,
+    /// New clips of the (one) class, e.g. the IK edits and VAE samples
+    /// `motionaug augment` wrote (NPZ or BVH): corrected from the class
+    /// tracker like its originals, in a row of their own.
+    #[arg(long, num_args = 1.., value_name = "CLIP")]
+    variants: Vec<PathBuf>,
+    /// Before the variants are corrected, train the class tracker further on
+    /// them for at most this many PPO iterations (starting from it, at its
+    /// residual gains, within `--tracker-budget`); 0 = correct them from the
+    /// originals' tracker.
+    #[arg(long, default_value_t = 0)]
+    variant_tracker_iterations: u64,
     /// Output folder: one correction folder per clip, table.md, table.json.
     #[arg(long)]
     out: PathBuf,
@@ -267,11 +278,46 @@ fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
     )?)
 }
 
+/// Trains (or reuses) the tracker of a class's new clips in `dir`: the class
+/// tracker in `from` trained further on `variants`.
+fn train_variant_tracker(
+    class: &str,
+    variants: &[(String, motion::Motion)],
+    from: &(correct::ClassReport, PathBuf),
+    dir: &Path,
+    args: &CorrectionArgs,
+) -> anyhow::Result<correct::ClassReport> {
+    let done = dir.join(correct::class::REPORT_FILE);
+    if done.is_file() {
+        return Ok(correct::ClassReport::read(&done)?);
+    }
+    let (report, class_dir) = from;
+    let base = correct::CorrectConfig {
+        time_budget_s: args.tracker_budget,
+        max_iterations: Some(args.variant_tracker_iterations),
+        ..base_config(args)
+    };
+    let config = correct::ClassConfig {
+        correct: report.warm_config(&base, class_dir),
+        ..correct::ClassConfig::default()
+    };
+    let resume = dir.join("checkpoints").is_dir();
+    let n = variants.len();
+    Ok(correct::train_class(variants, &config, dir, resume, |p| {
+        if let Some(a) = p.accepted {
+            eprintln!(
+                "{class} variant tracker: iteration {}, {:.0} s, {a}/{n} variants accepted as is",
+                p.iteration, p.wall_s
+            );
+        }
+    })?)
+}
+
 /// Corrects (or reuses) one clip into `dir`, from the class tracker when
 /// there is one.
 fn correct_one(
-    path: &Path,
-    asf: &Path,
+    load: impl FnOnce() -> anyhow::Result<motion::Motion>,
+    name: &str,
     dir: &Path,
     args: &CorrectionArgs,
     tracker: Option<&(correct::ClassReport, PathBuf)>,
@@ -280,20 +326,63 @@ fn correct_one(
     if done.is_file() {
         return Ok(correct::Report::read(&done)?);
     }
-    let motion = load_hdm05(path, asf)?;
+    let motion = load()?;
     let base = base_config(args);
     let config = match tracker {
         Some((report, class_dir)) => report.warm_config(&base, class_dir),
         None => base,
     };
     let resume = dir.join("checkpoints").is_dir();
-    let name = crate::input::clip_name(path);
-    Ok(correct::correct(&motion, &name, &config, dir, resume, |_| {})?.report)
+    Ok(correct::correct(&motion, name, &config, dir, resume, |_| {})?.report)
+}
+
+/// Loads a clip when its correction has not been done yet.
+type Loader<'a> = Box<dyn FnOnce() -> anyhow::Result<motion::Motion> + 'a>;
+
+/// Corrects `clips` (label, loader) into `out/<label>`, printing one line
+/// each; the reports in order.
+fn correct_all(
+    row: &str,
+    clips: Vec<(String, Loader<'_>)>,
+    out: &Path,
+    args: &CorrectionArgs,
+    tracker: Option<&(correct::ClassReport, PathBuf)>,
+) -> anyhow::Result<Vec<correct::Report>> {
+    let n = clips.len();
+    let mut reports = Vec::with_capacity(n);
+    for (i, (name, load)) in clips.into_iter().enumerate() {
+        let t = Instant::now();
+        let r = correct_one(load, &name, &out.join(&name), args, tracker)?;
+        eprintln!(
+            "{row} {}/{n} {name}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
+            i + 1,
+            if r.accepted { "accepted" } else { "rejected" },
+            r.r_norm,
+            r.residual_force_ratio,
+            t.elapsed().as_secs_f64(),
+            if r.rejected_because.is_empty() {
+                String::new()
+            } else {
+                format!("\n    {}", r.rejected_because.join("\n    "))
+            }
+        );
+        reports.push(r);
+    }
+    Ok(reports)
 }
 
 fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    if !args.variants.is_empty() && args.classes.len() != 1 {
+        anyhow::bail!("--variants are the new clips of one class: give exactly one --classes");
+    }
+    if args.variant_tracker_iterations > 0 && (args.variants.is_empty() || args.tracker_clips == 0)
+    {
+        anyhow::bail!(
+            "--variant-tracker-iterations needs --variants and a class tracker (--tracker-clips)"
+        );
+    }
     let started = Instant::now();
     let mut rows = Vec::new();
     for class in &args.classes {
@@ -323,37 +412,60 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
         };
         let chosen = eval::table::physics::spread(&candidates, args.per_class);
         let tracker = tracker.map(|(r, d, _)| (r, d));
-        let n = chosen.len();
-        let mut reports = Vec::new();
-        for (i, clip) in chosen.iter().enumerate() {
-            let asf = args.data.join(format!("HDM_{}.asf", clip.actor));
-            let t = Instant::now();
-            let r = correct_one(
-                &clip.path,
-                &asf,
-                &args.out.join(&clip.name),
-                &args,
-                tracker.as_ref(),
-            )?;
-            eprintln!(
-                "{class} {}/{n} {}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
-                i + 1,
-                clip.name,
-                if r.accepted { "accepted" } else { "rejected" },
-                r.r_norm,
-                r.residual_force_ratio,
-                t.elapsed().as_secs_f64(),
-                if r.rejected_because.is_empty() {
-                    String::new()
-                } else {
-                    format!("\n    {}", r.rejected_because.join("\n    "))
-                }
-            );
-            reports.push(r);
-        }
+        let originals = chosen
+            .iter()
+            .map(|clip| {
+                let asf = args.data.join(format!("HDM_{}.asf", clip.actor));
+                let load: Loader = Box::new(move || load_hdm05(&clip.path, &asf));
+                (clip.name.clone(), load)
+            })
+            .collect();
+        let reports = correct_all(class, originals, &args.out, &args, tracker.as_ref())?;
         // `--per-class 0` trains the tracker only: no row of nothing.
         if !reports.is_empty() {
             rows.push(correct::summary::ClassSummary::of(class, &reports));
+        }
+        if !args.variants.is_empty() {
+            let variants = args
+                .variants
+                .iter()
+                .map(|path| {
+                    let motion = motion::io::load(path, &motion::io::LoadOptions::default())
+                        .with_context(|| format!("cannot load variant {}", path.display()))?;
+                    Ok((crate::input::clip_name(path), motion))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let start = match &tracker {
+                Some(t) if args.variant_tracker_iterations > 0 => {
+                    let dir = args.out.join(format!("{class}_variant_tracker"));
+                    let report = train_variant_tracker(class, &variants, t, &dir, &args)?;
+                    eprintln!(
+                        "{class} variant tracker: {}/{} variants accepted as is after {} iterations, {:.0} s",
+                        report.accepted(),
+                        report.clips,
+                        report.iterations,
+                        report.wall_s
+                    );
+                    Some((report, dir))
+                }
+                _ => tracker.clone(),
+            };
+            let row = format!("{class} variants");
+            let clips = variants
+                .into_iter()
+                .map(|(name, motion)| {
+                    let load: Loader = Box::new(move || Ok(motion));
+                    (name, load)
+                })
+                .collect();
+            let reports = correct_all(
+                &row,
+                clips,
+                &args.out.join("variants"),
+                &args,
+                start.as_ref(),
+            )?;
+            rows.push(correct::summary::ClassSummary::of(&row, &reports));
         }
         let md = correct::summary::to_markdown(&rows);
         crate::output::write_atomic(&args.out.join("table.md"), md.as_bytes())?;
