@@ -4,7 +4,11 @@
 //! `motionaug bench correction --data DIR --classes a,b --per-class N --out DIR`:
 //! corrects N clips of each class (spread over the class) and writes the
 //! per-class table of acceptance, plausibility and wall time
-//! (`correct::summary`); finished clips are reused on a rerun.
+//! (`correct::summary`); finished clips are reused on a rerun. With
+//! `--variants CLIP...` (one class) the class's new clips, e.g. what
+//! `motionaug augment` wrote, are corrected from the class tracker in a row of
+//! their own; with `--variant-tracker-iterations` those the class tracker
+//! does not pass as is start from a second tracker trained on them.
 //!
 //! `motionaug bench soles --data DIR [--classes a,b]`: the soles criterion of
 //! acceptance applied to the captured clips themselves, per class: what the
@@ -191,10 +195,10 @@ struct CorrectionArgs {
     /// tracker like its originals, in a row of their own.
     #[arg(long, num_args = 1.., value_name = "CLIP")]
     variants: Vec<PathBuf>,
-    /// Before the variants are corrected, train the class tracker further on
-    /// them for at most this many PPO iterations (starting from it, at its
-    /// residual gains, within `--tracker-budget`); 0 = correct them from the
-    /// originals' tracker.
+    /// Variants the class tracker does not pass as is start from a second
+    /// tracker instead: the class tracker trained further on those variants
+    /// for at most this many PPO iterations (at its residual gains, within
+    /// `--tracker-budget`); 0 = every variant starts from the class tracker.
     #[arg(long, default_value_t = 0)]
     variant_tracker_iterations: u64,
     /// Output folder: one correction folder per clip, table.md, table.json.
@@ -283,7 +287,7 @@ fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
 fn train_variant_tracker(
     class: &str,
     variants: &[(String, motion::Motion)],
-    from: &(correct::ClassReport, PathBuf),
+    from: &Tracker,
     dir: &Path,
     args: &CorrectionArgs,
 ) -> anyhow::Result<correct::ClassReport> {
@@ -313,6 +317,30 @@ fn train_variant_tracker(
     })?)
 }
 
+/// The verdict of the class tracker in `from` on each variant, as is (no
+/// training; kept in `dir`).
+fn judge_variants(
+    variants: &[(String, motion::Motion)],
+    from: &Tracker,
+    dir: &Path,
+    args: &CorrectionArgs,
+) -> anyhow::Result<correct::ClassReport> {
+    let done = dir.join(correct::class::REPORT_FILE);
+    if done.is_file() {
+        return Ok(correct::ClassReport::read(&done)?);
+    }
+    let (report, class_dir) = from;
+    let base = correct::CorrectConfig {
+        max_iterations: Some(0),
+        ..base_config(args)
+    };
+    let config = correct::ClassConfig {
+        correct: report.warm_config(&base, class_dir),
+        ..correct::ClassConfig::default()
+    };
+    Ok(correct::train_class(variants, &config, dir, false, |_| {})?)
+}
+
 /// Corrects (or reuses) one clip into `dir`, from the class tracker when
 /// there is one.
 fn correct_one(
@@ -320,7 +348,7 @@ fn correct_one(
     name: &str,
     dir: &Path,
     args: &CorrectionArgs,
-    tracker: Option<&(correct::ClassReport, PathBuf)>,
+    tracker: Option<&Tracker>,
 ) -> anyhow::Result<correct::Report> {
     let done = dir.join("report.json");
     if done.is_file() {
@@ -339,18 +367,20 @@ fn correct_one(
 /// Loads a clip when its correction has not been done yet.
 type Loader<'a> = Box<dyn FnOnce() -> anyhow::Result<motion::Motion> + 'a>;
 
-/// Corrects `clips` (label, loader) into `out/<label>`, printing one line
-/// each; the reports in order.
+/// A class tracker's report and folder.
+type Tracker = (correct::ClassReport, PathBuf);
+
+/// Corrects `clips` (label, loader, the tracker it starts from) into
+/// `out/<label>`, printing one line each; the reports in order.
 fn correct_all(
     row: &str,
-    clips: Vec<(String, Loader<'_>)>,
+    clips: Vec<(String, Loader<'_>, Option<&Tracker>)>,
     out: &Path,
     args: &CorrectionArgs,
-    tracker: Option<&(correct::ClassReport, PathBuf)>,
 ) -> anyhow::Result<Vec<correct::Report>> {
     let n = clips.len();
     let mut reports = Vec::with_capacity(n);
-    for (i, (name, load)) in clips.into_iter().enumerate() {
+    for (i, (name, load, tracker)) in clips.into_iter().enumerate() {
         let t = Instant::now();
         let r = correct_one(load, &name, &out.join(&name), args, tracker)?;
         eprintln!(
@@ -417,10 +447,10 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
             .map(|clip| {
                 let asf = args.data.join(format!("HDM_{}.asf", clip.actor));
                 let load: Loader = Box::new(move || load_hdm05(&clip.path, &asf));
-                (clip.name.clone(), load)
+                (clip.name.clone(), load, tracker.as_ref())
             })
             .collect();
-        let reports = correct_all(class, originals, &args.out, &args, tracker.as_ref())?;
+        let reports = correct_all(class, originals, &args.out, &args)?;
         // `--per-class 0` trains the tracker only: no row of nothing.
         if !reports.is_empty() {
             rows.push(correct::summary::ClassSummary::of(class, &reports));
@@ -435,36 +465,64 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                     Ok((crate::input::clip_name(path), motion))
                 })
                 .collect::<anyhow::Result<Vec<_>>>()?;
-            let start = match &tracker {
+            // Each variant starts from the class tracker, or, when a second
+            // tracker is asked for and the class tracker does not pass it as
+            // is, from the second tracker, trained on those variants only.
+            let second = match &tracker {
                 Some(t) if args.variant_tracker_iterations > 0 => {
-                    let dir = args.out.join(format!("{class}_variant_tracker"));
-                    let report = train_variant_tracker(class, &variants, t, &dir, &args)?;
+                    let judged = judge_variants(
+                        &variants,
+                        t,
+                        &args.out.join(format!("{class}_variants_judged")),
+                        &args,
+                    )?;
+                    let failed: Vec<(String, motion::Motion)> = variants
+                        .iter()
+                        .filter(|(name, _)| {
+                            !judged
+                                .verdicts
+                                .iter()
+                                .any(|v| &v.name == name && v.accepted)
+                        })
+                        .cloned()
+                        .collect();
                     eprintln!(
-                        "{class} variant tracker: {}/{} variants accepted as is after {} iterations, {:.0} s",
-                        report.accepted(),
-                        report.clips,
-                        report.iterations,
-                        report.wall_s
+                        "{class} variants: {}/{} accepted as is by the class tracker",
+                        variants.len() - failed.len(),
+                        variants.len()
                     );
-                    Some((report, dir))
+                    if failed.is_empty() {
+                        None
+                    } else {
+                        let dir = args.out.join(format!("{class}_variant_tracker"));
+                        let report = train_variant_tracker(class, &failed, t, &dir, &args)?;
+                        eprintln!(
+                            "{class} variant tracker: {}/{} variants accepted as is after {} iterations, {:.0} s",
+                            report.accepted(),
+                            report.clips,
+                            report.iterations,
+                            report.wall_s
+                        );
+                        let names = failed.into_iter().map(|(n, _)| n).collect::<Vec<_>>();
+                        Some((report, dir, names))
+                    }
                 }
-                _ => tracker.clone(),
+                _ => None,
             };
-            let row = format!("{class} variants");
+            let second_tracker = second.as_ref().map(|(r, d, _)| (r.clone(), d.clone()));
             let clips = variants
                 .into_iter()
                 .map(|(name, motion)| {
+                    let start = match &second {
+                        Some((_, _, names)) if names.contains(&name) => second_tracker.as_ref(),
+                        _ => tracker.as_ref(),
+                    };
                     let load: Loader = Box::new(move || Ok(motion));
-                    (name, load)
+                    (name, load, start)
                 })
                 .collect();
-            let reports = correct_all(
-                &row,
-                clips,
-                &args.out.join("variants"),
-                &args,
-                start.as_ref(),
-            )?;
+            let row = format!("{class} variants");
+            let reports = correct_all(&row, clips, &args.out.join("variants"), &args)?;
             rows.push(correct::summary::ClassSummary::of(&row, &reports));
         }
         let md = correct::summary::to_markdown(&rows);
