@@ -443,6 +443,84 @@ fn a_static_root_above_the_hips_augments_and_corrects() {
     assert_eq!(m.fps(), 30.0);
 }
 
+/// `bench correction --variants`: a class's new clips in a row of their own,
+/// judged by the class tracker; one it does not pass as is starts from a
+/// second tracker, trained from the first on such clips only.
+#[test]
+fn bench_correction_corrects_variants_from_the_class_tracker_or_a_second_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = dir.path().join("noise.toml");
+    std::fs::write(&recipe, "seed = 3\n[[ops]]\nop = \"noise\"\ncopies = 1\n").unwrap();
+    let made = dir.path().join("made");
+    ok(motionaug(&[
+        "augment",
+        KICK,
+        "--recipe",
+        recipe.to_str().unwrap(),
+        "--out",
+        made.to_str().unwrap(),
+    ]));
+    let variant = std::fs::read_dir(&made)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "npz"))
+        .expect("augment wrote an NPZ");
+    let name = variant.file_stem().unwrap().to_str().unwrap().to_string();
+    let out = dir.path().join("bench");
+    let bench = |classes: &str| {
+        motionaug(&[
+            "bench",
+            "correction",
+            "--data",
+            "examples/data",
+            "--classes",
+            classes,
+            "--per-class",
+            "1",
+            "--tracker-clips",
+            "1",
+            "--tracker-iterations",
+            "1",
+            "--max-iterations",
+            "1",
+            "--threads",
+            "1",
+            "--variants",
+            variant.to_str().unwrap(),
+            "--variant-tracker-iterations",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let err = failed(bench("kick,jog"));
+    assert!(err.contains("one class"), "{err}");
+
+    ok(bench("kick"));
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("table.json")).unwrap()).unwrap();
+    let classes: Vec<&str> = rows.iter().map(|r| r["class"].as_str().unwrap()).collect();
+    assert_eq!(classes, ["kick", "kick variants"]);
+    assert!(rows.iter().all(|r| r["clips"] == 1), "{rows:?}");
+    let read = |p: std::path::PathBuf| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap()
+    };
+    let judged = read(out.join("kick_variants_judged/class.json"));
+    assert_eq!(judged["iterations"], 0, "judged as is, not trained");
+    assert_eq!(judged["verdicts"][0]["name"], name.as_str());
+    let report = read(out.join("variants").join(&name).join("report.json"));
+    let warm = report["warm_start"].as_str().unwrap().to_string();
+    if judged["verdicts"][0]["accepted"] == true {
+        assert!(warm.contains("kick_tracker"), "{warm}");
+        assert!(!out.join("kick_variant_tracker").exists());
+    } else {
+        assert!(warm.contains("kick_variant_tracker"), "{warm}");
+        let second = read(out.join("kick_variant_tracker/class.json"));
+        assert_eq!(second["clips"], 1);
+        assert_eq!(second["iterations"], 1);
+    }
+}
+
 /// HDM05 clips of all five actors (not bundled; the eval tests skip without it).
 const HDM05: &str = "../shared/data/hdm05";
 
