@@ -282,13 +282,15 @@ fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
     )?)
 }
 
-/// Trains (or reuses) the tracker of a class's new clips in `dir`: the class
-/// tracker in `from` trained further on `variants`.
-fn train_variant_tracker(
-    class: &str,
+/// Trains (or reuses) in `dir` a tracker of a class's new clips: the class
+/// tracker in `from` trained further on `variants` for at most `iterations`
+/// PPO iterations; with 0, its verdict on each variant as is.
+fn tracker_from(
+    label: &str,
     variants: &[(String, motion::Motion)],
     from: &Tracker,
     dir: &Path,
+    iterations: u64,
     args: &CorrectionArgs,
 ) -> anyhow::Result<correct::ClassReport> {
     let done = dir.join(correct::class::REPORT_FILE);
@@ -298,7 +300,7 @@ fn train_variant_tracker(
     let (report, class_dir) = from;
     let base = correct::CorrectConfig {
         time_budget_s: args.tracker_budget,
-        max_iterations: Some(args.variant_tracker_iterations),
+        max_iterations: Some(iterations),
         ..base_config(args)
     };
     let config = correct::ClassConfig {
@@ -310,35 +312,11 @@ fn train_variant_tracker(
     Ok(correct::train_class(variants, &config, dir, resume, |p| {
         if let Some(a) = p.accepted {
             eprintln!(
-                "{class} variant tracker: iteration {}, {:.0} s, {a}/{n} variants accepted as is",
+                "{label}: iteration {}, {:.0} s, {a}/{n} variants accepted as is",
                 p.iteration, p.wall_s
             );
         }
     })?)
-}
-
-/// The verdict of the class tracker in `from` on each variant, as is (no
-/// training; kept in `dir`).
-fn judge_variants(
-    variants: &[(String, motion::Motion)],
-    from: &Tracker,
-    dir: &Path,
-    args: &CorrectionArgs,
-) -> anyhow::Result<correct::ClassReport> {
-    let done = dir.join(correct::class::REPORT_FILE);
-    if done.is_file() {
-        return Ok(correct::ClassReport::read(&done)?);
-    }
-    let (report, class_dir) = from;
-    let base = correct::CorrectConfig {
-        max_iterations: Some(0),
-        ..base_config(args)
-    };
-    let config = correct::ClassConfig {
-        correct: report.warm_config(&base, class_dir),
-        ..correct::ClassConfig::default()
-    };
-    Ok(correct::train_class(variants, &config, dir, false, |_| {})?)
 }
 
 /// Corrects (or reuses) one clip into `dir`, from the class tracker when
@@ -470,10 +448,12 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
             // is, from the second tracker, trained on those variants only.
             let second = match &tracker {
                 Some(t) if args.variant_tracker_iterations > 0 => {
-                    let judged = judge_variants(
+                    let judged = tracker_from(
+                        &format!("{class} variants judged"),
                         &variants,
                         t,
                         &args.out.join(format!("{class}_variants_judged")),
+                        0,
                         &args,
                     )?;
                     let failed: Vec<(String, motion::Motion)> = variants
@@ -495,7 +475,14 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                         None
                     } else {
                         let dir = args.out.join(format!("{class}_variant_tracker"));
-                        let report = train_variant_tracker(class, &failed, t, &dir, &args)?;
+                        let report = tracker_from(
+                            &format!("{class} variant tracker"),
+                            &failed,
+                            t,
+                            &dir,
+                            args.variant_tracker_iterations,
+                            &args,
+                        )?;
                         eprintln!(
                             "{class} variant tracker: {}/{} variants accepted as is after {} iterations, {:.0} s",
                             report.accepted(),
