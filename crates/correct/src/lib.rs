@@ -73,17 +73,18 @@
 //! | variants start from | IK edits accepted | VAE samples accepted | VAE falls | clip s | tracker s |
 //! |---|---|---|---|---|---|
 //! | the class tracker (the pipeline today) | 34/34 | 2/34 (6 %) | 27 | 905 | 0 |
-//! | a second tracker for those it fails | 34/34 (all as is) | **8/34 (24 %)** | 6 | 572 | 414 |
+//! | a second tracker trained on all 68 (every variant starts from it) | 34/34 (all as is) | 5/34 (15 %) | 12 | 610 | 584 |
+//! | **a second tracker trained on the 38 the class tracker fails** | 34/34 (all as is) | **8/34 (24 %)** | 6 | 572 | 414 |
 //!
 //! Four times the VAE acceptance for about the same time (986 s against
 //! 905 s); falls drop from 27 to 6, and what rejects the rest is now
 //! residual force above 0.1 m g (20), skating above the input's (18) and
-//! soles (17): samples the character can follow only with help. Trained on
-//! all 68 instead, the second tracker lost the IK edits it had passed (a
-//! first attempt on the pipeline's written outputs, which are the corrected
-//! clips rather than the synthesised ones, gave IK 24 of 34: discarded, not
-//! a measurement of the method). The pipeline does not have the second
-//! tracker yet.
+//! soles (17): samples the character can follow only with help. Training
+//! the second tracker on the clips the first one already passes spends its
+//! iterations where nothing is to be gained (its 300 iterations took 584 s
+//! against 414 s, on a busier machine). The pipeline does not have
+//! the second tracker yet: it needs a job per class that waits for every
+//! synthesised clip of the class, between the tracker and the corrections.
 //!
 //! ## Session 14 (2026-12-04): deposit from a tracker on every clip, and the best judged tracker kept
 //!
