@@ -491,17 +491,16 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                             report.wall_s
                         );
                         let names = failed.into_iter().map(|(n, _)| n).collect::<Vec<_>>();
-                        Some((report, dir, names))
+                        Some(((report, dir), names))
                     }
                 }
                 _ => None,
             };
-            let second_tracker = second.as_ref().map(|(r, d, _)| (r.clone(), d.clone()));
             let clips = variants
                 .into_iter()
                 .map(|(name, motion)| {
                     let start = match &second {
-                        Some((_, _, names)) if names.contains(&name) => second_tracker.as_ref(),
+                        Some((second, names)) if names.contains(&name) => Some(second),
                         _ => tracker.as_ref(),
                     };
                     let load: Loader = Box::new(move || Ok(motion));
