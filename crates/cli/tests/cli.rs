@@ -505,14 +505,14 @@ fn bench_correction_corrects_variants_from_the_class_tracker_or_a_second_one() {
     let read = |p: std::path::PathBuf| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap()
     };
-    let judged = read(out.join("kick_variants_judged/class.json"));
+    let judged = read(out.join("kick_variant_tracker/judged/class.json"));
     assert_eq!(judged["iterations"], 0, "judged as is, not trained");
     assert_eq!(judged["verdicts"][0]["name"], name.as_str());
     let report = read(out.join("variants").join(&name).join("report.json"));
     let warm = report["warm_start"].as_str().unwrap().to_string();
     if judged["verdicts"][0]["accepted"] == true {
         assert!(warm.contains("kick_tracker"), "{warm}");
-        assert!(!out.join("kick_variant_tracker").exists());
+        assert!(!out.join("kick_variant_tracker/class.json").exists());
     } else {
         assert!(warm.contains("kick_variant_tracker"), "{warm}");
         let second = read(out.join("kick_variant_tracker/class.json"));

@@ -99,6 +99,10 @@ pub trait Inputs {
     fn debiaser(&self) -> Result<Arc<debias::Debiaser>, PipelineError>;
     /// The folder of class `group`'s tracker (`class.json`, `checkpoints/`).
     fn tracker(&self, group: &str) -> Result<PathBuf, PipelineError>;
+    /// The folder of the second tracker of class `group`'s new clips
+    /// (`variant_tracker`) when new clip `clip` starts from it: the class
+    /// tracker failed it as is. `None`: it starts from the class tracker.
+    fn variant_tracker(&self, group: &str, clip: &str) -> Result<Option<PathBuf>, PipelineError>;
 }
 
 /// What a job made.
@@ -125,6 +129,13 @@ pub enum Made {
     Tracker {
         group: String,
         report: correct::ClassReport,
+    },
+    /// The class tracker's verdict on a class's new clips, and the second
+    /// tracker trained on those it failed (`variant_tracker`): the verdict in
+    /// the job's `judged/` folder, the second tracker in the job's folder.
+    VariantTracker {
+        group: String,
+        tracker: stages::VariantTracker,
     },
 }
 
@@ -205,11 +216,12 @@ impl<'a> Context<'a> {
 }
 
 /// The folder of a job's own files under the in-process runner's `work`
-/// folder: `trackers/<group>`, `originals/<clip>`, `correct/<clip>`, `debias`;
+/// folder: `trackers/<group>`, `variant_trackers/<group>`, `originals/<clip>`, `correct/<clip>`, `debias`;
 /// `None` for kinds that keep nothing.
 pub fn job_dir(work: &Path, job: &PlannedJob) -> Option<PathBuf> {
     match &job.kind {
         JobKind::Tracker { group, .. } => Some(work.join("trackers").join(group)),
+        JobKind::VariantTracker { group, .. } => Some(work.join("variant_trackers").join(group)),
         JobKind::CorrectOriginal { clip, .. } => Some(work.join("originals").join(clip)),
         JobKind::Correct { clip, .. } => Some(work.join("correct").join(clip)),
         JobKind::DebiasTrain { .. } => Some(work.join("debias")),
@@ -295,6 +307,36 @@ pub fn execute(
                 report,
             })
         }
+        JobKind::VariantTracker {
+            group,
+            clips,
+            seed,
+            step,
+        } => {
+            let mut made = Vec::with_capacity(clips.len());
+            for name in clips {
+                let clip = inputs
+                    .clip(name)?
+                    .ok_or_else(|| PipelineError::Job(format!("`{name}` was not made")))?;
+                made.push((clip.name, clip.motion));
+            }
+            let class_dir = inputs.tracker(group)?;
+            let mut config = step.tracker_config(*seed).correct;
+            ctx.apply_to(&mut config);
+            let tracker = stages::train_variant_tracker(
+                &config,
+                &class_dir,
+                &made,
+                step.variant_tracker_iterations,
+                ctx.dir,
+                ctx.on_progress,
+            )
+            .map_err(stopped_is_stopped)?;
+            out.put(Made::VariantTracker {
+                group: group.clone(),
+                tracker,
+            })
+        }
         JobKind::CorrectOriginal {
             clip,
             seed,
@@ -315,6 +357,7 @@ pub fn execute(
         JobKind::Correct {
             clip,
             tracker,
+            variant_tracker,
             sources,
             seed,
             step,
@@ -323,7 +366,19 @@ pub fn execute(
                 .clip(clip)?
                 .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not made")))?;
             let warm = match tracker {
-                Some(group) => Warm::Tracker(inputs.tracker(group)?),
+                Some(group) => {
+                    let second = match variant_tracker {
+                        true => inputs.variant_tracker(group, clip)?,
+                        false => None,
+                    };
+                    if second.is_some() {
+                        tracing::info!(clip, "starts from the second tracker of its class");
+                    }
+                    match second {
+                        Some(dir) => Warm::Tracker(dir),
+                        None => Warm::Tracker(inputs.tracker(group)?),
+                    }
+                }
                 None => {
                     let outcomes = sources
                         .iter()

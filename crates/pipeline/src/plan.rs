@@ -15,13 +15,19 @@
 //! * `tracker` (one per class, with `[correct] policy = "class"`): the
 //!   class's clips; trains the class tracker every correction of the class
 //!   starts from (`correct::class`).
+//! * `variant_tracker` (one per class with new clips to correct, with
+//!   `policy = "class"` and `variant_tracker_iterations > 0`): the class's
+//!   `tracker` and the jobs that made its new clips; judges every new clip
+//!   with the class tracker as is, then trains a second tracker, from the
+//!   class tracker, on those it fails.
 //! * `correct_original` (one per source clip, when `[correct]` warm-starts
 //!   with one policy per clip, or `[debias]` is on): the source clip, and its
 //!   class's `tracker` with `policy = "class"`.
 //! * `correct` (one per new clip, except interaction outputs: two partners are
 //!   not simulated together): the job that made the clip; with
 //!   `policy = "class"` the tracker of the class of the first clip it was
-//!   made from; else with warm start the corrections of the clips it was made
+//!   made from (and that class's `variant_tracker`, when there is one: a clip
+//!   the class tracker fails starts from the second tracker); else with warm start the corrections of the clips it was made
 //!   from (its source clip; every clip of the class for a VAE sample), the
 //!   best of which warm-starts it.
 //! * `debias_train`: every `correct_original`.
@@ -68,6 +74,15 @@ pub enum JobKind {
         seed: u64,
         step: CorrectStep,
     },
+    /// The class tracker's verdict on the class's new clips as is, and a
+    /// second tracker trained on those it fails (`variant_tracker_iterations`).
+    VariantTracker {
+        group: String,
+        /// The new clips of the class, made by the job's dependencies.
+        clips: Vec<String>,
+        seed: u64,
+        step: CorrectStep,
+    },
     CorrectOriginal {
         clip: String,
         seed: u64,
@@ -82,6 +97,10 @@ pub enum JobKind {
         /// `sources` is empty).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         tracker: Option<String>,
+        /// Whether the class has a `variant_tracker` job: when the class
+        /// tracker failed this clip as is, it starts from the second tracker.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        variant_tracker: bool,
         /// Originals whose corrected policy may warm-start this one (with
         /// `[correct] warm_start`): the clip a variant was made from, or every
         /// clip of a VAE sample's class; the executor takes the best corrected
@@ -106,6 +125,7 @@ impl JobKind {
             JobKind::Vae { .. } => "vae",
             JobKind::Interaction { .. } => "interaction",
             JobKind::Tracker { .. } => "tracker",
+            JobKind::VariantTracker { .. } => "variant_tracker",
             JobKind::CorrectOriginal { .. } => "correct_original",
             JobKind::Correct { .. } => "correct",
             JobKind::DebiasTrain { .. } => "debias_train",
@@ -126,7 +146,9 @@ impl JobKind {
             JobKind::DebiasTrain { originals, .. } => {
                 originals.iter().map(String::as_str).collect()
             }
-            JobKind::Correct { .. } | JobKind::DebiasApply { .. } => vec![],
+            JobKind::Correct { .. }
+            | JobKind::VariantTracker { .. }
+            | JobKind::DebiasApply { .. } => vec![],
         }
     }
 
@@ -138,7 +160,10 @@ impl JobKind {
             | JobKind::Correct { clip, .. }
             | JobKind::DebiasApply { clip } => Some(clip),
             JobKind::Interaction { a, .. } => Some(a),
-            JobKind::Vae { .. } | JobKind::Tracker { .. } | JobKind::DebiasTrain { .. } => None,
+            JobKind::Vae { .. }
+            | JobKind::Tracker { .. }
+            | JobKind::VariantTracker { .. }
+            | JobKind::DebiasTrain { .. } => None,
         }
     }
 }
@@ -259,7 +284,8 @@ pub struct PlanSize {
     /// Correction jobs (`correct_original` and `correct`), each training up to
     /// `[correct] time_budget_s`.
     pub corrections: u64,
-    /// Class tracker jobs (`policy = "class"`), each training up to
+    /// Class tracker jobs (`policy = "class"`), and second trackers of their
+    /// new clips (`variant_tracker_iterations`), each training up to
     /// `[correct] tracker_budget_s`.
     pub trackers: u64,
     /// Every job of the graph.
@@ -272,18 +298,27 @@ pub fn size(recipe: &Recipe, names: &[String]) -> PlanSize {
     let clips = names.len() as u64;
     let mut size = PlanSize::default();
     let mut correctable = 0u64;
+    // Classes with new clips to correct (each gets a `variant_tracker`).
+    let mut new_classes: std::collections::BTreeSet<String> = Default::default();
     if let Some(s) = &recipe.synth {
         let made = clips.saturating_mul(s.outputs_per_clip() as u64);
         size.jobs += clips;
         size.outputs = size.outputs.saturating_add(made);
         correctable = correctable.saturating_add(made);
+        if made > 0 {
+            new_classes.extend(names.iter().map(|n| class_of(n)));
+        }
     }
     if let Some(v) = &recipe.vae {
-        let groups = vae_groups(v, names).len() as u64;
-        let made = groups.saturating_mul(v.copies as u64);
-        size.jobs += groups;
+        let groups = vae_groups(v, names);
+        let made = (groups.len() as u64).saturating_mul(v.copies as u64);
+        size.jobs += groups.len() as u64;
         size.outputs = size.outputs.saturating_add(made);
         correctable = correctable.saturating_add(made);
+        if v.copies > 0 {
+            // A sample's class is that of the first clip it was made from.
+            new_classes.extend(groups.values().map(|clips| class_of(&clips[0])));
+        }
     }
     if let Some(i) = &recipe.interaction {
         let pairs = pairs(names).len() as u64;
@@ -303,6 +338,9 @@ pub fn size(recipe: &Recipe, names: &[String]) -> PlanSize {
             let classes: std::collections::BTreeSet<String> =
                 names.iter().map(|n| class_of(n)).collect();
             size.trackers = classes.len() as u64;
+            if c.variant_tracker_iterations > 0 {
+                size.trackers += new_classes.len() as u64;
+            }
         }
         size.corrections = originals.saturating_add(correctable);
         size.jobs = size
@@ -463,6 +501,22 @@ impl Graph {
                 });
             }
         }
+        // The second trackers: per class, its new clips and the jobs that made them.
+        let second = by_class && c.variant_tracker_iterations > 0;
+        let mut variants: BTreeMap<String, (Vec<String>, Vec<String>)> = BTreeMap::new();
+        for clip in self.new_clips.iter().filter(|n| second && n.correctable) {
+            if let Some(group) = clip.sources.first().map(|s| class_of(s)) {
+                let (clips, makers) = variants.entry(group).or_default();
+                clips.push(clip.name.clone());
+                if !makers.contains(&clip.producer) {
+                    makers.push(clip.producer.clone());
+                }
+            }
+        }
+        for (group, (clips, makers)) in variants {
+            self.jobs
+                .push(variant_tracker_job(&group, clips, makers, seed, c));
+        }
         let mut corrected = Vec::new();
         for clip in self.new_clips.iter().filter(|n| n.correctable) {
             let key = format!("correct:{}", clip.name);
@@ -474,10 +528,14 @@ impl Graph {
             };
             let mut deps = vec![clip.producer.clone()];
             deps.extend(tracker.iter().map(|g| tracker_key(g)));
+            if second {
+                deps.extend(tracker.iter().map(|g| variant_tracker_key(g)));
+            }
             deps.extend(sources.iter().map(|s| format!("correct_original:{s}")));
             self.jobs.push(PlannedJob {
                 kind: JobKind::Correct {
                     clip: clip.name.clone(),
+                    variant_tracker: second && tracker.is_some(),
                     tracker,
                     sources,
                     seed: job_seed(seed, &key),
@@ -499,6 +557,37 @@ impl Graph {
 /// The key of the tracker job of class `group`.
 pub fn tracker_key(group: &str) -> String {
     format!("tracker:{group}")
+}
+
+/// The key of the second tracker job of class `group`'s new clips.
+pub fn variant_tracker_key(group: &str) -> String {
+    format!("variant_tracker:{group}")
+}
+
+/// The `variant_tracker` job of class `group`: its new `clips`, made by the
+/// jobs `makers`, judged by the class tracker, those it fails trained on.
+fn variant_tracker_job(
+    group: &str,
+    clips: Vec<String>,
+    makers: Vec<String>,
+    seed: u64,
+    step: &CorrectStep,
+) -> PlannedJob {
+    let key = variant_tracker_key(group);
+    let mut deps = vec![tracker_key(group)];
+    deps.extend(makers);
+    PlannedJob {
+        kind: JobKind::VariantTracker {
+            group: group.to_string(),
+            clips,
+            seed: job_seed(seed, &key),
+            step: step.clone(),
+        },
+        key,
+        deps,
+        outputs: vec![],
+        finishes: false,
+    }
 }
 
 /// `debias_train` on the corrected `originals`, then a `debias_apply` per
@@ -558,8 +647,10 @@ impl Plan {
 /// with `debias` train the debiasing network on the accepted originals and
 /// apply it to the accepted corrected clips. With `policy = "class"` one
 /// tracker (group `class`) is trained on the originals first and every
-/// correction starts from it instead. `seed_of` gives each job's seed (the
-/// tracker's is `seed_of("tracker")`).
+/// correction starts from it instead (with `variant_tracker_iterations`, a
+/// clip of `clips` it fails as is from the second tracker trained on those).
+/// `seed_of` gives each job's seed (the trackers' are `seed_of("tracker")`
+/// and `seed_of("variant_tracker")`).
 pub fn corrections(
     originals: &[String],
     clips: &[String],
@@ -601,8 +692,21 @@ pub fn corrections(
             finishes: false,
         });
     }
+    let second = tracker.is_some() && step.variant_tracker_iterations > 0 && !clips.is_empty();
+    if second {
+        let mut job = variant_tracker_job("class", clips.to_vec(), vec![], 0, step);
+        if let JobKind::VariantTracker { seed, .. } = &mut job.kind {
+            *seed = seed_of("variant_tracker");
+        }
+        jobs.push(job);
+    }
     for clip in clips {
         let (sources, deps) = match &tracker {
+            Some(_) if second => {
+                let mut deps = tracker_deps.clone();
+                deps.push(variant_tracker_key("class"));
+                (vec![], deps)
+            }
             Some(_) => (vec![], tracker_deps.clone()),
             None => (originals.to_vec(), original_keys.clone()),
         };
@@ -610,6 +714,7 @@ pub fn corrections(
             key: format!("correct:{clip}"),
             kind: JobKind::Correct {
                 clip: clip.clone(),
+                variant_tracker: second,
                 tracker: tracker.clone(),
                 sources,
                 seed: seed_of(clip),
@@ -681,5 +786,85 @@ mod tests {
         }
         // The debiaser still learns from the corrected originals.
         assert!(plan.job("debias_train").is_some());
+    }
+
+    #[test]
+    fn a_second_tracker_sits_between_the_class_tracker_and_the_new_clips() {
+        let step = CorrectStep {
+            policy: PolicyKind::Class,
+            variant_tracker_iterations: 9,
+            ..CorrectStep::default()
+        };
+        // The evaluation's plan: the new clips are given.
+        let plan = corrections(&names(&["a"]), &names(&["s1", "s2"]), &step, None, |n| {
+            if n == "variant_tracker" { 3 } else { 0 }
+        });
+        let key = variant_tracker_key("class");
+        match plan.job(&key).map(|j| (&j.kind, &j.deps)) {
+            Some((JobKind::VariantTracker { clips, seed, .. }, deps)) => {
+                assert_eq!(clips, &names(&["s1", "s2"]));
+                assert_eq!(*seed, 3);
+                assert_eq!(deps, &names(&["tracker:class"]));
+            }
+            other => panic!("no second tracker: {other:?}"),
+        }
+        let s1 = plan.job("correct:s1").expect("correct:s1");
+        assert_eq!(s1.deps, names(&["tracker:class", &key]));
+        assert!(matches!(
+            s1.kind,
+            JobKind::Correct {
+                variant_tracker: true,
+                ..
+            }
+        ));
+        // Originals do not wait for it.
+        let original = plan.job("correct_original:a").expect("original");
+        assert_eq!(original.deps, names(&["tracker:class"]));
+
+        // The pipeline's plan: one per class with new clips, after the jobs
+        // that made them.
+        let recipe = Recipe::from_toml_str(
+            "[[ops]]\nop = \"mirror\"\n[vae]\ncopies = 1\nmin_clips = 2\n\
+             [correct]\npolicy = \"class\"\nvariant_tracker_iterations = 9\n",
+        )
+        .expect("recipe");
+        let clips = names(&["HDM_bd_kick_001_120", "HDM_bk_kick_002_120", "walk"]);
+        let plan = super::plan(&recipe, &clips, 0);
+        let position = |key: &str| plan.jobs.iter().position(|j| j.key == key);
+        let kick = plan
+            .job("variant_tracker:kick")
+            .expect("kick's second tracker");
+        assert_eq!(
+            kick.deps,
+            names(&[
+                "tracker:kick",
+                "synthesize:HDM_bd_kick_001_120",
+                "synthesize:HDM_bk_kick_002_120",
+                "vae:kick"
+            ])
+        );
+        for dep in &kick.deps {
+            assert!(position(dep) < position("variant_tracker:kick"), "{dep}");
+        }
+        let walk = plan
+            .job("variant_tracker:walk")
+            .expect("walk's second tracker");
+        assert_eq!(walk.deps, names(&["tracker:walk", "synthesize:walk"]));
+        let sample = plan
+            .job("correct:kick__vae_000")
+            .expect("the sample's correction");
+        assert!(sample.deps.contains(&"variant_tracker:kick".to_string()));
+        assert!(position("variant_tracker:kick") < position("correct:kick__vae_000"));
+        // Off by default: no second tracker, no dependency on one.
+        let off =
+            Recipe::from_toml_str("[[ops]]\nop = \"mirror\"\n[correct]\npolicy = \"class\"\n")
+                .expect("recipe");
+        let off = super::plan(&off, &clips, 0);
+        assert!(
+            !off.jobs
+                .iter()
+                .any(|j| j.key.starts_with("variant_tracker:")
+                    || j.deps.iter().any(|d| d.starts_with("variant_tracker:")))
+        );
     }
 }

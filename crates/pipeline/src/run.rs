@@ -347,6 +347,13 @@ impl<'a> State<'a> {
                     clips = report.clips,
                     "class tracker ready"
                 ),
+                Made::VariantTracker { group, tracker } => tracing::info!(
+                    group,
+                    accepted_as_is = tracker.judged.accepted(),
+                    clips = tracker.judged.clips,
+                    second_accepts = tracker.second.as_ref().map(|r| r.accepted()),
+                    "second tracker of the class's new clips ready"
+                ),
             }
         }
         Ok(())
@@ -428,6 +435,21 @@ impl Inputs for State<'_> {
                 "the tracker of class `{group}` was not trained"
             )))
         }
+    }
+
+    fn variant_tracker(&self, group: &str, clip: &str) -> Result<Option<PathBuf>, PipelineError> {
+        let dir = self.options.work.join("variant_trackers").join(group);
+        let judged = dir
+            .join(crate::stages::JUDGED_DIR)
+            .join(correct::class::REPORT_FILE);
+        if !judged.is_file() {
+            return Err(PipelineError::Job(format!(
+                "the new clips of class `{group}` were not judged by its tracker"
+            )));
+        }
+        let judged = correct::ClassReport::read(&judged)?;
+        let second = dir.join(correct::class::REPORT_FILE).is_file();
+        Ok(crate::stages::VariantTracker::starts_from_second(&judged, second, clip).then_some(dir))
     }
 }
 

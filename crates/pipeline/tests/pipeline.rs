@@ -582,6 +582,58 @@ fn a_class_tracker_runs_in_process_and_its_corrections_start_from_it() {
     }
 }
 
+#[test]
+fn new_clips_the_class_tracker_fails_start_from_a_second_tracker() {
+    // A mean reward of 1 is never reached: the class tracker fails both
+    // noisy copies as is, so the second tracker trains on both.
+    let text = CORRECTED
+        .replace(
+            "[correct]",
+            "[correct]\npolicy = \"class\"\ntracker_budget_s = 1\nvariant_tracker_iterations = 1",
+        )
+        .replace(
+            "accept_threshold = 0.0",
+            "accept_threshold = 1.0\nkeep_rejected = true",
+        );
+    let text = &text[..text.find("[debias]").expect("debias table")];
+    let recipe = Recipe::from_toml_str(text).expect("recipe");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let work = dir.path().join("work");
+    let options = Options {
+        out: None,
+        work: &work,
+        seed: 5,
+        on_event: &quiet,
+    };
+    let summary = run(&recipe, &[kick()], &options).expect("run");
+    assert!(summary.failures.is_empty(), "{:?}", summary.failures);
+    assert_eq!(summary.manifest.len(), 2);
+    let variants = work.join("variant_trackers/kickLFront1Reps");
+    let judged = correct::ClassReport::read(
+        &variants
+            .join(pipeline::stages::JUDGED_DIR)
+            .join(correct::class::REPORT_FILE),
+    )
+    .expect("judged");
+    assert_eq!(judged.clips, 2);
+    assert_eq!(judged.accepted(), 0);
+    let second =
+        correct::ClassReport::read(&variants.join(correct::class::REPORT_FILE)).expect("second");
+    assert_eq!((second.clips, second.iterations), (2, 1));
+    for entry in &summary.manifest {
+        let clip = entry.synth.file.trim_end_matches(".bvh");
+        let r = correct::Report::read(&work.join("correct").join(clip).join("report.json"))
+            .expect("report");
+        let from = r.warm_start.expect("warm-started");
+        assert!(from.contains("variant_trackers"), "{clip}: {from}");
+    }
+    // A rerun reuses the judgement, the second tracker and the corrections.
+    let again = run(&recipe, &[kick()], &options).expect("rerun");
+    assert_eq!(again.manifest, summary.manifest);
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\nvariant_tracker_iterations = 5\n");
+    assert!(e.contains("variant_tracker_iterations"), "{e}");
+}
+
 /// Every numeric field the tables' crates leave open has an upper bound:
 /// values past it are refused naming the table, the field and the bound, and
 /// the bound itself is accepted.
@@ -609,6 +661,11 @@ fn numeric_recipe_fields_have_upper_bounds() {
             "[correct]",
             "tracker_budget_s",
             "[correct]\npolicy = \"class\"\ntracker_budget_s = 1e12\n",
+        ),
+        (
+            "[correct]",
+            "variant_tracker_iterations",
+            "[correct]\npolicy = \"class\"\nvariant_tracker_iterations = 1000001\n",
         ),
         ("[vae]", "iterations", "[vae]\niterations = 1000000000000\n"),
         ("[vae]", "min_clips", "[vae]\nmin_clips = 1000000\n"),
@@ -671,10 +728,10 @@ fn numeric_recipe_fields_have_upper_bounds() {
     let at_bounds = format!(
         "{base}[vae]\niterations = 100000\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
          policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\ntracker_iterations = 1000000\n\
-         [debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
+         variant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 18);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 19);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.
@@ -698,6 +755,8 @@ fn plan_size_counts_what_plan_makes() {
         "[vae]\ngroup_by = \"all\"\ncopies = 5\n[correct]\nwarm_start = false\n",
         "[[ops]]\nop = \"mirror\"\n[vae]\ncopies = 2\n[correct]\npolicy = \"class\"\n",
         "[[ops]]\nop = \"mirror\"\n[correct]\npolicy = \"class\"\n[debias]\n",
+        "[[ops]]\nop = \"mirror\"\n[vae]\ncopies = 2\n[correct]\npolicy = \"class\"\nvariant_tracker_iterations = 3\n",
+        "[vae]\ngroup_by = \"all\"\ncopies = 2\n[correct]\npolicy = \"class\"\nvariant_tracker_iterations = 3\n",
     ];
     for text in recipes {
         let recipe = Recipe::from_toml_str(text).expect(text);
@@ -718,7 +777,7 @@ fn plan_size_counts_what_plan_makes() {
             let trackers = plan
                 .jobs
                 .iter()
-                .filter(|j| j.kind.name() == "tracker")
+                .filter(|j| matches!(j.kind.name(), "tracker" | "variant_tracker"))
                 .count() as u64;
             let size = pipeline::plan::size(&recipe, names);
             assert_eq!(size.outputs, made, "{text} over {clips} clips");

@@ -28,6 +28,9 @@ pub mod kinds {
     pub const INTERACTION: &str = "interaction";
     /// Train a class's tracker policy (`[correct] policy = "class"`).
     pub const TRACKER: &str = "tracker";
+    /// Judge a class's new clips with its tracker and train a second tracker
+    /// on those it fails (`[correct] variant_tracker_iterations`).
+    pub const VARIANT_TRACKER: &str = "variant_tracker";
     /// Physical correction of a source clip (warm start and debiasing data).
     pub const CORRECT_ORIGINAL: &str = "correct_original";
     /// Physical correction of a new clip.
@@ -42,6 +45,7 @@ pub mod kinds {
         VAE,
         INTERACTION,
         TRACKER,
+        VARIANT_TRACKER,
         CORRECT_ORIGINAL,
         CORRECT,
         DEBIAS_TRAIN,
@@ -264,6 +268,19 @@ pub mod artifacts {
     /// A class tracker's report (`correct::ClassReport`, `class.json`).
     pub fn tracker_report(group: &str) -> String {
         format!("work/trackers/{group}/class.json")
+    }
+    /// The class tracker's verdict on the class's new clips as is
+    /// (`variant_tracker`; a `correct::ClassReport`).
+    pub fn variant_judged(group: &str) -> String {
+        format!("work/variant_trackers/{group}/judged.json")
+    }
+    /// The second tracker's latest checkpoint, zipped (when it was trained).
+    pub fn variant_tracker_checkpoints(group: &str) -> String {
+        format!("work/variant_trackers/{group}/checkpoints.zip")
+    }
+    /// The second tracker's report (when it was trained).
+    pub fn variant_tracker_report(group: &str) -> String {
+        format!("work/variant_trackers/{group}/class.json")
     }
 }
 

@@ -69,11 +69,15 @@ fn failure(e: PipelineError) -> JobFailure {
 }
 
 /// Jobs that train a policy: they upload PPO checkpoints while they run and
-/// resume from them (a class tracker too).
+/// resume from them (class trackers too; a `variant_tracker`'s is its second
+/// tracker's, the judging before it is quick and done again).
 fn is_correction(job: &PlannedJob) -> bool {
     matches!(
         job.kind,
-        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. } | JobKind::Tracker { .. }
+        JobKind::Correct { .. }
+            | JobKind::CorrectOriginal { .. }
+            | JobKind::Tracker { .. }
+            | JobKind::VariantTracker { .. }
     )
 }
 
@@ -81,9 +85,10 @@ fn is_correction(job: &PlannedJob) -> bool {
 /// checkpoints are uploaded from there; the debiasing model in `debias/`).
 fn exec_dir(dir: &Path, job: &PlannedJob) -> PathBuf {
     match job.kind {
-        JobKind::Correct { .. } | JobKind::CorrectOriginal { .. } | JobKind::Tracker { .. } => {
-            dir.join("run")
-        }
+        JobKind::Correct { .. }
+        | JobKind::CorrectOriginal { .. }
+        | JobKind::Tracker { .. }
+        | JobKind::VariantTracker { .. } => dir.join("run"),
         JobKind::DebiasTrain { .. } => dir.join("debias"),
         _ => dir.join("job"),
     }
@@ -427,11 +432,36 @@ impl pipeline::Inputs for HttpInputs<'_> {
         let report = self.dep_file(&key, &artifacts::tracker_report(group))?;
         let checkpoint = self.dep_file(&key, &artifacts::tracker_checkpoints(group))?;
         let into = self.dir.join("tracker");
-        unzip_into(&checkpoint, &into.join("checkpoints"))?;
-        let path = into.join(correct::class::REPORT_FILE);
-        std::fs::write(&path, report).map_err(|e| io_error(&path, e))?;
+        unpack_tracker(&into, &report, &checkpoint)?;
         Ok(into)
     }
+
+    /// The judged verdicts say whether `clip` starts from the second tracker;
+    /// only then is it fetched and unpacked.
+    fn variant_tracker(&self, group: &str, clip: &str) -> Result<Option<PathBuf>, PipelineError> {
+        let key = pipeline::plan::variant_tracker_key(group);
+        let file = artifacts::variant_judged(group);
+        let judged: correct::ClassReport = serde_json::from_slice(&self.dep_file(&key, &file)?)
+            .map_err(|e| PipelineError::Job(format!("{file}: {e}")))?;
+        let report_file = artifacts::variant_tracker_report(group);
+        let second = self.dep(&key)?.work.contains(&report_file);
+        if !pipeline::stages::VariantTracker::starts_from_second(&judged, second, clip) {
+            return Ok(None);
+        }
+        let report = self.dep_file(&key, &report_file)?;
+        let checkpoint = self.dep_file(&key, &artifacts::variant_tracker_checkpoints(group))?;
+        let into = self.dir.join("variant_tracker");
+        unpack_tracker(&into, &report, &checkpoint)?;
+        Ok(Some(into))
+    }
+}
+
+/// A tracker's folder as the executor expects it: `class.json` and
+/// `checkpoints/<latest>/` (from its zipped latest checkpoint).
+fn unpack_tracker(into: &Path, report: &[u8], checkpoint: &[u8]) -> Result<(), PipelineError> {
+    unzip_into(checkpoint, &into.join("checkpoints"))?;
+    let path = into.join(correct::class::REPORT_FILE);
+    std::fs::write(&path, report).map_err(|e| io_error(&path, e))
 }
 
 /// Uploads what the executor makes and builds the job's output.
@@ -605,6 +635,22 @@ impl pipeline::Outputs for Uploader<'_> {
                     .map_err(|e| PipelineError::Job(format!("class.json: {e}")))?;
                 self.put_work(artifacts::tracker_checkpoints(&group), checkpoint)?;
                 self.put_work(artifacts::tracker_report(&group), report)
+            }
+            Made::VariantTracker { group, tracker } => {
+                let judged = serde_json::to_vec(&tracker.judged)
+                    .map_err(|e| PipelineError::Job(format!("judged.json: {e}")))?;
+                self.put_work(artifacts::variant_judged(&group), judged)?;
+                let Some(second) = tracker.second else {
+                    return Ok(());
+                };
+                let checkpoint = latest_checkpoint_zip(&self.run_dir.join("checkpoints"))?
+                    .ok_or_else(|| {
+                        PipelineError::Job("the second tracker left no checkpoint".into())
+                    })?;
+                let report = serde_json::to_vec(&second)
+                    .map_err(|e| PipelineError::Job(format!("class.json: {e}")))?;
+                self.put_work(artifacts::variant_tracker_checkpoints(&group), checkpoint)?;
+                self.put_work(artifacts::variant_tracker_report(&group), report)
             }
         }
     }

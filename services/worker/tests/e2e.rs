@@ -66,6 +66,9 @@ fn main() {
         ("class_tracker_on_two_workers", || {
             block_on(class_tracker_on_two_workers())
         }),
+        ("variant_tracker_on_two_workers", || {
+            block_on(variant_tracker_on_two_workers())
+        }),
         ("npz_and_static_root_clips", || {
             block_on(npz_and_static_root_clips())
         }),
@@ -1138,6 +1141,61 @@ async fn class_tracker_on_two_workers() -> anyhow::Result<()> {
                 "the correction did not start from the tracker: {report}"
             );
             let out = c.dir.join("local-tracker");
+            std::fs::create_dir_all(&out)?;
+            local_run(&recipe, CORRECT_CLIPS, &out)?;
+            let ours = manifest_structure(&got["manifest.json"])?;
+            let local = manifest_structure(&std::fs::read(out.join("manifest.json"))?)?;
+            ensure!(
+                ours == local,
+                "manifests differ:\nservice {ours:#}\nlocal {local:#}"
+            );
+            Ok(())
+        }
+        .await;
+        (c, result)
+    })
+    .await
+}
+
+/// `variant_tracker_iterations`: the class tracker fails the new clip (the
+/// acceptance asks for a mean reward of 1, which nothing reaches), so a
+/// second tracker is trained on it and its correction starts from that one,
+/// fetched through the coordinator; the manifest is the in-process run's.
+async fn variant_tracker_on_two_workers() -> anyhow::Result<()> {
+    with_cluster(|mut c| async move {
+        let result = async {
+            c.start_worker("w0", 0)?;
+            c.start_worker("w1", 0)?;
+            let mut recipe = correct_recipe();
+            recipe["correct"]["policy"] = json!("class");
+            recipe["correct"]["tracker_budget_s"] = json!(1);
+            recipe["correct"]["variant_tracker_iterations"] = json!(1);
+            recipe["correct"]["accept_threshold"] = json!(1.0);
+            recipe.as_object_mut().map(|r| r.remove("debias"));
+            let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
+            c.wait_for(&aug, "succeeded", Duration::from_secs(300))
+                .await?;
+            check_jobs(
+                &c,
+                &[
+                    ("synthesize", 1),
+                    ("tracker", 1),
+                    ("variant_tracker", 1),
+                    ("correct", 1),
+                ],
+            )
+            .await?;
+            let got = download(&c, &aug).await?;
+            let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
+            let report: Value =
+                serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
+            let from = report["warm_start"].as_str().unwrap_or_default();
+            ensure!(
+                from.contains("variant_tracker"),
+                "the correction did not start from the second tracker: {report}"
+            );
+            ensure!(report["accepted"] == false, "{report}");
+            let out = c.dir.join("local-variant-tracker");
             std::fs::create_dir_all(&out)?;
             local_run(&recipe, CORRECT_CLIPS, &out)?;
             let ours = manifest_structure(&got["manifest.json"])?;

@@ -282,43 +282,6 @@ fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
     )?)
 }
 
-/// Trains (or reuses) in `dir` a tracker of a class's new clips: the class
-/// tracker in `from` trained further on `variants` for at most `iterations`
-/// PPO iterations; with 0, its verdict on each variant as is.
-fn tracker_from(
-    label: &str,
-    variants: &[(String, motion::Motion)],
-    from: &Tracker,
-    dir: &Path,
-    iterations: u64,
-    args: &CorrectionArgs,
-) -> anyhow::Result<correct::ClassReport> {
-    let done = dir.join(correct::class::REPORT_FILE);
-    if done.is_file() {
-        return Ok(correct::ClassReport::read(&done)?);
-    }
-    let (report, class_dir) = from;
-    let base = correct::CorrectConfig {
-        time_budget_s: args.tracker_budget,
-        max_iterations: Some(iterations),
-        ..base_config(args)
-    };
-    let config = correct::ClassConfig {
-        correct: report.warm_config(&base, class_dir),
-        ..correct::ClassConfig::default()
-    };
-    let resume = dir.join("checkpoints").is_dir();
-    let n = variants.len();
-    Ok(correct::train_class(variants, &config, dir, resume, |p| {
-        if let Some(a) = p.accepted {
-            eprintln!(
-                "{label}: iteration {}, {:.0} s, {a}/{n} variants accepted as is",
-                p.iteration, p.wall_s
-            );
-        }
-    })?)
-}
-
 /// Corrects (or reuses) one clip into `dir`, from the class tracker when
 /// there is one.
 fn correct_one(
@@ -447,52 +410,40 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
             // tracker is asked for and the class tracker does not pass it as
             // is, from the second tracker, trained on those variants only.
             let second = match &tracker {
-                Some(t) if args.variant_tracker_iterations > 0 => {
-                    let judged = tracker_from(
-                        &format!("{class} variants judged"),
+                Some((_, class_dir)) if args.variant_tracker_iterations > 0 => {
+                    let dir = args.out.join(format!("{class}_variant_tracker"));
+                    let base = correct::CorrectConfig {
+                        time_budget_s: args.tracker_budget,
+                        ..base_config(&args)
+                    };
+                    let label = format!("{class} variant tracker");
+                    let v = pipeline::stages::train_variant_tracker(
+                        &base,
+                        class_dir,
                         &variants,
-                        t,
-                        &args.out.join(format!("{class}_variants_judged")),
-                        0,
-                        &args,
+                        args.variant_tracker_iterations,
+                        &dir,
+                        &|p| {
+                            if p.iteration % 10 == 0 {
+                                eprintln!("{label}: iteration {}, {:.0} s", p.iteration, p.wall_s);
+                            }
+                        },
                     )?;
-                    let failed: Vec<(String, motion::Motion)> = variants
-                        .iter()
-                        .filter(|(name, _)| {
-                            !judged
-                                .verdicts
-                                .iter()
-                                .any(|v| &v.name == name && v.accepted)
-                        })
-                        .cloned()
-                        .collect();
                     eprintln!(
                         "{class} variants: {}/{} accepted as is by the class tracker",
-                        variants.len() - failed.len(),
+                        v.judged.accepted(),
                         variants.len()
                     );
-                    if failed.is_empty() {
-                        None
-                    } else {
-                        let dir = args.out.join(format!("{class}_variant_tracker"));
-                        let report = tracker_from(
-                            &format!("{class} variant tracker"),
-                            &failed,
-                            t,
-                            &dir,
-                            args.variant_tracker_iterations,
-                            &args,
-                        )?;
+                    v.second.map(|report| {
                         eprintln!(
-                            "{class} variant tracker: {}/{} variants accepted as is after {} iterations, {:.0} s",
+                            "{label}: {}/{} variants accepted as is after {} iterations, {:.0} s",
                             report.accepted(),
                             report.clips,
                             report.iterations,
                             report.wall_s
                         );
-                        let names = failed.into_iter().map(|(n, _)| n).collect::<Vec<_>>();
-                        Some(((report, dir), names))
-                    }
+                        ((report, dir), v.judged)
+                    })
                 }
                 _ => None,
             };
@@ -500,7 +451,13 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 .into_iter()
                 .map(|(name, motion)| {
                     let start = match &second {
-                        Some((second, names)) if names.contains(&name) => Some(second),
+                        Some((second, judged))
+                            if pipeline::stages::VariantTracker::starts_from_second(
+                                judged, true, &name,
+                            ) =>
+                        {
+                            Some(second)
+                        }
                         _ => tracker.as_ref(),
                     };
                     let load: Loader = Box::new(move || Ok(motion));
