@@ -807,6 +807,8 @@ fn eval_table_corrects_with_one_class_tracker() {
         "1",
         "--clip-iterations",
         "1",
+        "--variant-tracker-iterations",
+        "1",
         "--debias-iterations",
         "20",
         "--out",
@@ -818,6 +820,17 @@ fn eval_table_corrects_with_one_class_tracker() {
         stderr.contains("class tracker: training on 2 originals"),
         "{stderr}"
     );
+    // The samples are judged by the class tracker, and those it fails go to
+    // a second tracker.
+    assert!(
+        stderr.contains("second tracker: judging 2 samples"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("second tracker: trained"), "{stderr}");
+    let judged = out.join("work/bk_sneak/variant_trackers/class/judged/class.json");
+    let judged: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&judged).unwrap()).unwrap();
+    assert_eq!(judged["clips"], 2, "{judged}");
     assert!(stderr.contains("class tracker: trained"), "{stderr}");
     assert!(
         stderr.contains("every sample starts from the class tracker"),
@@ -829,4 +842,5 @@ fn eval_table_corrects_with_one_class_tracker() {
     let physics = &v["cells"][0]["physics"];
     assert_eq!(physics["samples"], 2, "{physics}");
     assert_eq!(v["config"]["physics"]["policy"], "class");
+    assert_eq!(v["config"]["physics"]["variant_tracker_iterations"], 1);
 }

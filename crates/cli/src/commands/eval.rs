@@ -480,6 +480,11 @@ struct PhysicsArgs {
     /// PPO iterations of a clip's fine-tuning at most (--correct-policy class).
     #[arg(long, default_value_t = PhysicsConfig::default().clip_iterations)]
     clip_iterations: u64,
+    /// Samples the class tracker fails as is start from a second tracker,
+    /// trained on them from the class tracker for at most this many PPO
+    /// iterations (--correct-policy class); 0 = off.
+    #[arg(long, default_value_t = PhysicsConfig::default().variant_tracker_iterations)]
+    variant_tracker_iterations: u64,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -564,6 +569,7 @@ impl TableArgs {
                 tracker_iterations: p.tracker_iterations,
                 tracker_budget_s: p.tracker_budget_s,
                 clip_iterations: p.clip_iterations,
+                variant_tracker_iterations: p.variant_tracker_iterations,
             },
         }
     }

@@ -53,6 +53,16 @@ pub struct PhysicsConfig {
     pub tracker_budget_s: f64,
     /// PPO iterations of a clip's fine-tuning at most (`policy = class`).
     pub clip_iterations: u64,
+    /// With `policy = class`, samples the class tracker fails as is start from
+    /// a second tracker trained on them for at most this many PPO iterations
+    /// (`[correct] variant_tracker_iterations`); 0 = off. Left out of the
+    /// config's JSON when 0, so tables saved before it existed still resume.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub variant_tracker_iterations: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 impl Default for PhysicsConfig {
@@ -67,6 +77,7 @@ impl Default for PhysicsConfig {
             tracker_iterations: 150,
             tracker_budget_s: 6000.0,
             clip_iterations: 15,
+            variant_tracker_iterations: 0,
         }
     }
 }
@@ -76,6 +87,11 @@ impl PhysicsConfig {
         if !(self.tracker_budget_s.is_finite() && self.tracker_budget_s > 0.0) {
             return Err(EvalError::Config(
                 "the class tracker's time budget must be positive".into(),
+            ));
+        }
+        if self.variant_tracker_iterations > 0 && self.policy != pipeline::PolicyKind::Class {
+            return Err(EvalError::Config(
+                "a second tracker (variant tracker iterations) needs the class policy".into(),
             ));
         }
         if !(self.correct_budget_s.is_finite() && self.correct_budget_s > 0.0) {
@@ -217,11 +233,23 @@ impl Seen {
                         "class tracker: training on {} originals",
                         clips.len()
                     )),
+                    pipeline::JobKind::VariantTracker { clips, .. } => log(&format!(
+                        "second tracker: judging {} samples with the class tracker, \
+                         training on those it fails",
+                        clips.len()
+                    )),
                     pipeline::JobKind::Correct {
-                        tracker: Some(_), ..
+                        tracker: Some(_),
+                        variant_tracker,
+                        ..
                     } if !self.said_warm_start => {
                         self.said_warm_start = true;
-                        log("warm start: every sample starts from the class tracker");
+                        log(if *variant_tracker {
+                            "warm start: every sample starts from the class tracker, or from \
+                             the second tracker when the class tracker fails it as is"
+                        } else {
+                            "warm start: every sample starts from the class tracker"
+                        });
                     }
                     pipeline::JobKind::Correct { .. } if !self.said_warm_start => {
                         self.said_warm_start = true;
@@ -234,9 +262,14 @@ impl Seen {
                 }
             }
             pipeline::Event::JobFinished { job, ok } => {
-                if matches!(job.kind, pipeline::JobKind::Tracker { .. }) {
+                let what = match job.kind {
+                    pipeline::JobKind::Tracker { .. } => Some("class tracker"),
+                    pipeline::JobKind::VariantTracker { .. } => Some("second tracker"),
+                    _ => None,
+                };
+                if let Some(what) = what {
                     log(&format!(
-                        "class tracker: {} in {:.0} s",
+                        "{what}: {} in {:.0} s",
                         if ok { "trained" } else { "failed" },
                         self.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
                     ));
@@ -341,6 +374,7 @@ pub fn correct_and_debias(
         max_iterations: class.then_some(config.clip_iterations),
         tracker_iterations: Some(config.tracker_iterations),
         tracker_budget_s: config.tracker_budget_s,
+        variant_tracker_iterations: config.variant_tracker_iterations,
         ..pipeline::CorrectStep::default()
     };
     let debias = debias::TrainConfig {
