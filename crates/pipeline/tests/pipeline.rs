@@ -24,6 +24,16 @@ fn kick() -> Clip {
 
 fn quiet(_: Event<'_>) {}
 
+/// The in-process runner's options: results in memory, work in `work`, seed 5.
+fn in_process(work: &std::path::Path) -> Options<'_> {
+    Options {
+        out: None,
+        work,
+        seed: 5,
+        on_event: &quiet,
+    }
+}
+
 fn recipe_err(text: &str) -> String {
     match Recipe::from_toml_str(text) {
         Ok(_) => panic!("accepted:\n{text}"),
@@ -296,9 +306,7 @@ fn correction_and_debiasing_run_in_process_and_survive_a_rerun() {
     let work = out.join("work");
     let options = Options {
         out: Some(&out),
-        work: &work,
-        seed: 5,
-        on_event: &quiet,
+        ..in_process(&work)
     };
     let summary = run(&recipe, &clips, &options).expect("run");
     assert!(summary.failures.is_empty(), "{:?}", summary.failures);
@@ -363,12 +371,7 @@ fn rejected_corrections_are_left_out_unless_kept() {
     let recipe = Recipe::from_toml_str(&text).expect("recipe");
     let clips = [kick()];
     let work = tempfile::tempdir().expect("tempdir");
-    let options = Options {
-        out: None,
-        work: work.path(),
-        seed: 5,
-        on_event: &quiet,
-    };
+    let options = in_process(work.path());
     let summary = run(&recipe, &clips, &options).expect("run");
     assert!(summary.outputs.is_empty());
     assert_eq!(summary.rejected.len(), 2);
@@ -538,12 +541,7 @@ fn a_class_tracker_runs_in_process_and_its_corrections_start_from_it() {
     let clips = [kick()];
     let dir = tempfile::tempdir().expect("tempdir");
     let work = dir.path().join("work");
-    let options = Options {
-        out: None,
-        work: &work,
-        seed: 5,
-        on_event: &quiet,
-    };
+    let options = in_process(&work);
     let summary = run(&recipe, &clips, &options).expect("run");
     // A one-second tracker is barely trained: a clip it corrects may fall
     // (rejected, so its debiasing is skipped). That is the plumbing working;
@@ -599,12 +597,7 @@ fn new_clips_the_class_tracker_fails_start_from_a_second_tracker() {
     let recipe = Recipe::from_toml_str(text).expect("recipe");
     let dir = tempfile::tempdir().expect("tempdir");
     let work = dir.path().join("work");
-    let options = Options {
-        out: None,
-        work: &work,
-        seed: 5,
-        on_event: &quiet,
-    };
+    let options = in_process(&work);
     let summary = run(&recipe, &[kick()], &options).expect("run");
     assert!(summary.failures.is_empty(), "{:?}", summary.failures);
     assert_eq!(summary.manifest.len(), 2);

@@ -1119,42 +1119,7 @@ async fn correction_graph_on_two_workers() -> anyhow::Result<()> {
 /// correction (on whichever worker claims it) starts from the tracker it
 /// fetched through the coordinator; the manifest is the in-process run's.
 async fn class_tracker_on_two_workers() -> anyhow::Result<()> {
-    with_cluster(|mut c| async move {
-        let result = async {
-            c.start_worker("w0", 0)?;
-            c.start_worker("w1", 0)?;
-            let mut recipe = correct_recipe();
-            recipe["correct"]["policy"] = json!("class");
-            recipe["correct"]["tracker_budget_s"] = json!(1);
-            recipe.as_object_mut().map(|r| r.remove("debias"));
-            let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
-            c.wait_for(&aug, "succeeded", Duration::from_secs(300))
-                .await?;
-            check_jobs(&c, &[("synthesize", 1), ("tracker", 1), ("correct", 1)]).await?;
-            let got = download(&c, &aug).await?;
-            let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
-            let report: Value =
-                serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
-            let from = report["warm_start"].as_str().unwrap_or_default();
-            ensure!(
-                from.contains("tracker"),
-                "the correction did not start from the tracker: {report}"
-            );
-            let out = c.dir.join("local-tracker");
-            std::fs::create_dir_all(&out)?;
-            local_run(&recipe, CORRECT_CLIPS, &out)?;
-            let ours = manifest_structure(&got["manifest.json"])?;
-            let local = manifest_structure(&std::fs::read(out.join("manifest.json"))?)?;
-            ensure!(
-                ours == local,
-                "manifests differ:\nservice {ours:#}\nlocal {local:#}"
-            );
-            Ok(())
-        }
-        .await;
-        (c, result)
-    })
-    .await
+    tracker_on_two_workers(false).await
 }
 
 /// `variant_tracker_iterations`: the class tracker fails the new clip (the
@@ -1162,6 +1127,11 @@ async fn class_tracker_on_two_workers() -> anyhow::Result<()> {
 /// second tracker is trained on it and its correction starts from that one,
 /// fetched through the coordinator; the manifest is the in-process run's.
 async fn variant_tracker_on_two_workers() -> anyhow::Result<()> {
+    tracker_on_two_workers(true).await
+}
+
+/// The class tracker scenarios, without or with a second tracker.
+async fn tracker_on_two_workers(second: bool) -> anyhow::Result<()> {
     with_cluster(|mut c| async move {
         let result = async {
             c.start_worker("w0", 0)?;
@@ -1169,33 +1139,29 @@ async fn variant_tracker_on_two_workers() -> anyhow::Result<()> {
             let mut recipe = correct_recipe();
             recipe["correct"]["policy"] = json!("class");
             recipe["correct"]["tracker_budget_s"] = json!(1);
-            recipe["correct"]["variant_tracker_iterations"] = json!(1);
-            recipe["correct"]["accept_threshold"] = json!(1.0);
+            let mut jobs = vec![("synthesize", 1), ("tracker", 1), ("correct", 1)];
+            if second {
+                recipe["correct"]["variant_tracker_iterations"] = json!(1);
+                recipe["correct"]["accept_threshold"] = json!(1.0);
+                jobs.push(("variant_tracker", 1));
+            }
             recipe.as_object_mut().map(|r| r.remove("debias"));
             let aug = c.upload_and_augment_with(CORRECT_CLIPS, &recipe).await?;
             c.wait_for(&aug, "succeeded", Duration::from_secs(300))
                 .await?;
-            check_jobs(
-                &c,
-                &[
-                    ("synthesize", 1),
-                    ("tracker", 1),
-                    ("variant_tracker", 1),
-                    ("correct", 1),
-                ],
-            )
-            .await?;
+            check_jobs(&c, &jobs).await?;
             let got = download(&c, &aug).await?;
             let clip = "HDM_bd_kickLFront1Reps_001_120__00_mirror_000";
             let report: Value =
                 serde_json::from_slice(&got[&format!("work/correct/{clip}/report.json")])?;
             let from = report["warm_start"].as_str().unwrap_or_default();
+            let expected = if second { "variant_tracker" } else { "tracker" };
             ensure!(
-                from.contains("variant_tracker"),
-                "the correction did not start from the second tracker: {report}"
+                from.contains(expected),
+                "the correction did not start from the {expected}: {report}"
             );
-            ensure!(report["accepted"] == false, "{report}");
-            let out = c.dir.join("local-variant-tracker");
+            ensure!(!second || report["accepted"] == false, "{report}");
+            let out = c.dir.join(format!("local-{expected}"));
             std::fs::create_dir_all(&out)?;
             local_run(&recipe, CORRECT_CLIPS, &out)?;
             let ours = manifest_structure(&got["manifest.json"])?;
