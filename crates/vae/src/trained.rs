@@ -223,6 +223,19 @@ impl TrainedVae {
     /// each with its root path re-integrated from its planted feet
     /// (`motion::metrics::plant_root`), so that the root goes where the legs
     /// step. The same seed gives the same clips.
+    /// The model with near codes drawn between `members` training clips of
+    /// a cluster instead of the number it was trained with
+    /// ([`crate::NearConfig::members`]).
+    pub fn with_near_members(mut self, members: usize) -> Result<Self> {
+        if members == 0 {
+            return Err(VaeError::Config(
+                "near sampling needs at least one member".into(),
+            ));
+        }
+        self.meta.latents.members = members;
+        Ok(self)
+    }
+
     pub fn sample(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
         let th = motion::metrics::Thresholds::default();
         let mut samples = self.sample_decoded(count, prior, seed)?;

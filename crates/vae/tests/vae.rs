@@ -208,12 +208,22 @@ fn near_samples_are_closer_to_training_posteriors_than_prior_samples() {
             })
             .fold(f32::INFINITY, f32::min)
     };
-    let mean = |prior| {
+    let mean = |model: &vae::TrainedVae, prior| {
         let s = model.sample(100, prior, 1).unwrap();
         s.iter().map(|s| nearest(&s.z)).sum::<f32>() / s.len() as f32
     };
-    let (near, normal) = (mean(Prior::Near), mean(Prior::Normal));
+    let (near, normal) = (mean(&model, Prior::Near), mean(&model, Prior::Normal));
     assert!(near < normal, "near {near} vs normal {normal}");
+    // Near one training clip rather than between two: closer still.
+    let dir = tempfile::tempdir().unwrap();
+    model.save(dir.path()).unwrap();
+    let single = vae::TrainedVae::load(dir.path())
+        .unwrap()
+        .with_near_members(1)
+        .unwrap();
+    let near_one = mean(&single, Prior::Near);
+    assert!(near_one < near, "one member {near_one} vs two {near}");
+    assert!(model.with_near_members(0).is_err());
 }
 
 #[test]

@@ -81,6 +81,10 @@ struct SampleArgs {
     /// Latent codes from `near` (sampling near samples) or `normal` (N(0, I)).
     #[arg(long, default_value = "near")]
     prior: Prior,
+    /// Near codes are drawn between this many training clips of a cluster
+    /// (default: the model's, the paper's 2; 1 samples near single clips).
+    #[arg(long)]
+    members: Option<usize>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
 }
@@ -178,8 +182,11 @@ fn sample(args: SampleArgs) -> anyhow::Result<()> {
     if args.count == 0 {
         bail!("--count must be at least 1");
     }
-    let model = TrainedVae::load(&args.model)
+    let mut model = TrainedVae::load(&args.model)
         .with_context(|| format!("cannot load the model in {}", args.model.display()))?;
+    if let Some(members) = args.members {
+        model = model.with_near_members(members)?;
+    }
     let samples = model.sample(args.count, args.prior, args.seed)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
