@@ -44,7 +44,7 @@ enum Command {
     /// Learn the bias physical correction leaves in clips, and remove it.
     Debias(commands::debias::Args),
     /// Evaluate augmentations: min DTW / MMD, and motion prediction with and without them.
-    Eval(commands::eval::Args),
+    Eval(Box<commands::eval::Args>),
     /// Motion prediction models: train one on clips, predict a clip's future from occluded frames.
     Predict(commands::predict::Args),
     /// Serve the viewer page for augment outputs or clips: play them in 3D, see corrections' curves.
@@ -71,7 +71,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => commands::bench::run(args),
         Command::Vae(args) => commands::vae::run(args),
         Command::Debias(args) => commands::debias::run(args),
-        Command::Eval(args) => commands::eval::run(args),
+        Command::Eval(args) => commands::eval::run(*args),
         Command::View(args) => commands::view::run(args),
         Command::Predict(args) => commands::predict::run(args),
     };

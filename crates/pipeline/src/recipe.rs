@@ -14,6 +14,7 @@
 //! copies = 10
 //! iterations = 1500
 //! prior = "near"            # near | normal
+//! near_members = 2          # near codes between this many clips of a cluster
 //!
 //! [interaction]             # every pair <stem>_A / <stem>_B: `copies` body-size variations of B
 //! copies = 4
@@ -67,6 +68,9 @@ pub struct VaeStep {
     pub adversarial: bool,
     /// Classes with fewer clips than this are skipped (a VAE of one clip only copies it).
     pub min_clips: usize,
+    /// Near codes are drawn between this many training clips of a cluster
+    /// (`vae::NearConfig::members`; the paper's 2).
+    pub near_members: usize,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -85,6 +89,7 @@ impl Default for VaeStep {
             prior: vae::Prior::Near,
             adversarial: true,
             min_clips: 2,
+            near_members: vae::NearConfig::default().members,
         }
     }
 }
@@ -364,6 +369,7 @@ pub mod bounds {
 
     pub const VAE_ITERATIONS: Bound = bound("vae", "iterations", 100_000.0, "training steps");
     pub const VAE_MIN_CLIPS: Bound = bound("vae", "min_clips", 10_000.0, "clips");
+    pub const VAE_NEAR_MEMBERS: Bound = bound("vae", "near_members", 10_000.0, "clips");
     pub const CORRECT_TIME_BUDGET_S: Bound = bound(
         "correct",
         "time_budget_s",
@@ -423,6 +429,7 @@ pub mod bounds {
     pub const ALL: &[Bound] = &[
         VAE_ITERATIONS,
         VAE_MIN_CLIPS,
+        VAE_NEAR_MEMBERS,
         CORRECT_TIME_BUDGET_S,
         CORRECT_ENVS,
         CORRECT_TRACKER_BUDGET_S,
@@ -570,6 +577,10 @@ impl Recipe {
                 return Err(err("[vae]", "`iterations` must be at least 1"));
             }
             bounds::VAE_ITERATIONS.check(v.iterations as f64)?;
+            if v.near_members == 0 {
+                return Err(err("[vae]", "`near_members` must be at least 1"));
+            }
+            bounds::VAE_NEAR_MEMBERS.check(v.near_members as f64)?;
             if v.min_clips == 0 {
                 return Err(err("[vae]", "`min_clips` must be at least 1"));
             }

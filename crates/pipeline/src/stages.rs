@@ -67,12 +67,13 @@ pub fn vae(
 ) -> Result<Vec<NewClip>, PipelineError> {
     let span = tracing::info_span!("vae_job", group, clips = clips.len());
     let _guard = span.enter();
-    let config = vae::TrainConfig {
+    let mut config = vae::TrainConfig {
         iterations: step.iterations,
         adversarial: step.adversarial,
         seed,
         ..vae::TrainConfig::default()
     };
+    config.near.members = step.near_members;
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
     let model = vae::train(&motions, &config, |_| {})?;
     let samples = model.sample(step.copies as usize, step.prior, seed)?;

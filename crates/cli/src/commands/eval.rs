@@ -523,6 +523,11 @@ struct TableArgs {
     /// Also train the VAE without discriminators (min DTW / MMD ablation).
     #[arg(long)]
     vae_ablation: bool,
+    /// Draw the VAE's near codes between this many training clips of a
+    /// cluster (default: the VAE's own, the paper's 2; 1 samples near single
+    /// clips).
+    #[arg(long)]
+    vae_near_members: Option<usize>,
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
@@ -554,6 +559,7 @@ impl TableArgs {
             noise_sigma_deg: self.noise_sigma_deg,
             vae_iterations: self.vae_iterations,
             vae_ablation: self.vae_ablation,
+            vae_near_members: self.vae_near_members,
             predict: !self.no_predict,
             sets: self.sets.clone(),
             physics: PhysicsConfig {

@@ -130,6 +130,9 @@ pub struct TableConfig {
     pub vae_iterations: u64,
     /// Also train the VAE without discriminators (synthesis metrics only).
     pub vae_ablation: bool,
+    /// Draw near codes between this many training clips of a cluster instead
+    /// of the VAE's own (the paper's 2; see the vae crate's README).
+    pub vae_near_members: Option<usize>,
     /// Train and score the prediction models (else synthesis metrics only).
     pub predict: bool,
     pub sets: Vec<SetKind>,
@@ -151,6 +154,7 @@ impl Default for TableConfig {
             noise_sigma_deg: 2.0,
             vae_iterations: 1500,
             vae_ablation: false,
+            vae_near_members: None,
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
@@ -419,7 +423,10 @@ fn synthesised_sets(
     for (tag, weight) in vae_runs {
         let t = Instant::now();
         let cache = work.join(format!("{tag}-{}it", config.vae_iterations));
-        let model = cached_vae(&cache, &split.train, config.vae_iterations, weight, log)?;
+        let mut model = cached_vae(&cache, &split.train, config.vae_iterations, weight, log)?;
+        if let Some(members) = config.vae_near_members {
+            model = model.with_near_members(members)?;
+        }
         cell.vae_seconds
             .insert(tag.into(), t.elapsed().as_secs_f64());
         sets.push((

@@ -19,7 +19,7 @@ impl TableConfig {
     pub fn to_json(&self) -> Value {
         let c = self;
         let t = &c.train;
-        json!({
+        let mut v = json!({
             "classes": c.classes,
             "test_actors": c.test_actors,
             "models": c.models,
@@ -37,7 +37,12 @@ impl TableConfig {
             "vae_ablation": c.vae_ablation,
             "sets": c.sets,
             "physics": c.sets.contains(&SetKind::Physics).then_some(&c.physics),
-        })
+        });
+        // Only when set, so that tables saved before it existed still resume.
+        if let (Some(n), Some(map)) = (c.vae_near_members, v.as_object_mut()) {
+            map.insert("vae_near_members".into(), json!(n));
+        }
+        v
     }
 
     /// What shapes one cell's numbers: the config but for which classes and
