@@ -27,6 +27,10 @@ pub struct SetPlausibility {
     pub foot_skating_m_s: f64,
     pub penetration_mean_m: f64,
     pub floating_fraction: f64,
+    /// Joint speed relative to the root, m/s (`Plausibility::pose_speed_m_s`):
+    /// low for sets of near-frozen clips.
+    #[serde(default)]
+    pub pose_speed_m_s: f64,
 }
 
 impl SetPlausibility {
@@ -39,6 +43,7 @@ impl SetPlausibility {
             foot_skating_m_s: mean(|p| p.foot_skating_m_s),
             penetration_mean_m: mean(|p| p.penetration_mean_m),
             floating_fraction: mean(|p| p.floating_fraction),
+            pose_speed_m_s: mean(|p| p.pose_speed_m_s),
         }
     }
 }

@@ -251,11 +251,11 @@ fn run_one(
 
 fn table(rows: &[Row]) -> String {
     let mut t = String::from(
-        "| class | variant | s (s/it) | s to 10 % | root RMSE m / angle rad | skating m/s orig / recon / decoded / samples (ratio) | penetration mm orig / samples | floating % orig / samples | MMD^2 samples / train |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| class | variant | s (s/it) | s to 10 % | root RMSE m / angle rad | skating m/s orig / recon / decoded / samples (ratio) | penetration mm orig / samples | floating % orig / samples | pose speed m/s orig / samples | MMD^2 samples / train |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         t += &format!(
-            "| {} | {} | {:.0} ({:.3}) | {:.0} | {:.3} / {:.3} | {:.3} / {:.3} / {:.3} / {:.3} ({:.1}x) | {:.1} / {:.1} | {:.0} / {:.0} | {:.3} / {:.3} |\n",
+            "| {} | {} | {:.0} ({:.3}) | {:.0} | {:.3} / {:.3} | {:.3} / {:.3} / {:.3} / {:.3} ({:.1}x) | {:.1} / {:.1} | {:.0} / {:.0} | {:.2} / {:.2} | {:.3} / {:.3} |\n",
             r.class,
             r.variant.name(),
             r.seconds,
@@ -272,6 +272,8 @@ fn table(rows: &[Row]) -> String {
             r.samples.penetration_mean_m * 1000.0,
             r.originals.floating_fraction * 100.0,
             r.samples.floating_fraction * 100.0,
+            r.originals.pose_speed_m_s,
+            r.samples.pose_speed_m_s,
             r.mmd2_samples_to_test,
             r.mmd2_train_to_test,
         );

@@ -118,16 +118,17 @@ impl Table {
             set_table(
                 &mut md,
                 &format!(
-                    "Plausibility, test actor {actor}: foot skating m/s / mean penetration mm / floating %"
+                    "Plausibility, test actor {actor}: foot skating m/s / mean penetration mm / floating % / pose speed m/s (joints relative to the root; near 0 = frozen clips)"
                 ),
                 &row_cells,
                 |s| {
                     let p = &s.plausibility;
                     format!(
-                        "{:.3} / {:.1} / {:.0}",
+                        "{:.3} / {:.1} / {:.0} / {:.2}",
                         p.foot_skating_m_s,
                         1000.0 * p.penetration_mean_m,
-                        100.0 * p.floating_fraction
+                        100.0 * p.floating_fraction,
+                        p.pose_speed_m_s
                     )
                 },
             );
