@@ -300,10 +300,14 @@ mod tests {
         .map(String::from)
         .to_vec();
         let mut seen = std::collections::BTreeSet::new();
-        for policy in ["clip", "class"] {
+        for correct in [
+            "policy = \"clip\"",
+            "policy = \"class\"",
+            "policy = \"class\"\nvariant_tracker_iterations = 1",
+        ] {
             let recipe = pipeline::Recipe::from_toml_str(&format!(
                 "[[ops]]\nop = \"mirror\"\n[vae]\nmin_clips = 1\n[interaction]\n\
-                 [correct]\npolicy = \"{policy}\"\n[debias]\n"
+                 [correct]\n{correct}\n[debias]\n"
             ))
             .expect("recipe");
             for job in pipeline::plan(&recipe, &names, 0).jobs {
