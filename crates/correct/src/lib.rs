@@ -58,9 +58,12 @@
 //! (`pipeline::stages::train_variant_tracker`) serves `motionaug augment`,
 //! the service's workers (judgement, report and checkpoint shared through
 //! the coordinator like the class tracker's), `eval table
-//! --variant-tracker-iterations` and `bench correction --variants`. Session
-//! 15 measured its effect on jog: VAE samples accepted 2/34 -> 8/34. It is
-//! off by default until more classes are measured.
+//! --variant-tracker-iterations` and `bench correction --variants`. Its
+//! effect, 300 iterations: jog VAE samples accepted 2/34 -> 8/34 (session
+//! 15's bench); the kick eval fold (bd, seed 0; `eval` crate README) IK
+//! edits 33/46 -> 43/46 and VAE samples 11/46 -> 25/46, for 935 s of
+//! second tracker on a loaded core, and the full method's prediction error
+//! 0.10-0.28 rad lower. Off by default until more classes are measured.
 //!
 //! **Why the VAE samples fall.** Most of them do not move: near codes drawn
 //! between the paper's two training clips decode to nearly frozen mid-jog
