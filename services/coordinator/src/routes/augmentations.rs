@@ -54,7 +54,7 @@ pub struct AugmentationStatus {
     pub progress: f64,
     pub jobs: JobCounts,
     /// Jobs of each kind: synthesize, vae, interaction, tracker,
-    /// correct_original, correct, debias_train, debias_apply.
+    /// variant_tracker, correct_original, correct, debias_train, debias_apply.
     pub kinds: BTreeMap<String, i64>,
     pub errors: Vec<JobError>,
     pub created_at: DateTime<Utc>,
