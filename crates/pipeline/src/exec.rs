@@ -216,8 +216,8 @@ impl<'a> Context<'a> {
 }
 
 /// The folder of a job's own files under the in-process runner's `work`
-/// folder: `trackers/<group>`, `variant_trackers/<group>`, `originals/<clip>`, `correct/<clip>`, `debias`;
-/// `None` for kinds that keep nothing.
+/// folder: `trackers/<group>`, `variant_trackers/<group>`, `originals/<clip>`,
+/// `correct/<clip>`, `debias`; `None` for kinds that keep nothing.
 pub fn job_dir(work: &Path, job: &PlannedJob) -> Option<PathBuf> {
     match &job.kind {
         JobKind::Tracker { group, .. } => Some(work.join("trackers").join(group)),
@@ -367,15 +367,16 @@ pub fn execute(
                 .ok_or_else(|| PipelineError::Job(format!("`{clip}` was not made")))?;
             let warm = match tracker {
                 Some(group) => {
-                    let second = match variant_tracker {
-                        true => inputs.variant_tracker(group, clip)?,
-                        false => None,
+                    let second = if *variant_tracker {
+                        inputs.variant_tracker(group, clip)?
+                    } else {
+                        None
                     };
-                    if second.is_some() {
-                        tracing::info!(clip, "starts from the second tracker of its class");
-                    }
                     match second {
-                        Some(dir) => Warm::Tracker(dir),
+                        Some(dir) => {
+                            tracing::info!(clip, "starts from the second tracker of its class");
+                            Warm::Tracker(dir)
+                        }
                         None => Warm::Tracker(inputs.tracker(group)?),
                     }
                 }

@@ -27,9 +27,10 @@
 //!   not simulated together): the job that made the clip; with
 //!   `policy = "class"` the tracker of the class of the first clip it was
 //!   made from (and that class's `variant_tracker`, when there is one: a clip
-//!   the class tracker fails starts from the second tracker); else with warm start the corrections of the clips it was made
-//!   from (its source clip; every clip of the class for a VAE sample), the
-//!   best of which warm-starts it.
+//!   the class tracker fails starts from the second tracker); else with warm
+//!   start the corrections of the clips it was made from (its source clip;
+//!   every clip of the class for a VAE sample), the best of which warm-starts
+//!   it.
 //! * `debias_train`: every `correct_original`.
 //! * `debias_apply` (one per corrected clip): its `correct` and `debias_train`.
 
@@ -503,19 +504,22 @@ impl Graph {
         }
         // The second trackers: per class, its new clips and the jobs that made them.
         let second = by_class && c.variant_tracker_iterations > 0;
-        let mut variants: BTreeMap<String, (Vec<String>, Vec<String>)> = BTreeMap::new();
-        for clip in self.new_clips.iter().filter(|n| second && n.correctable) {
-            if let Some(group) = clip.sources.first().map(|s| class_of(s)) {
-                let (clips, makers) = variants.entry(group).or_default();
-                clips.push(clip.name.clone());
-                if !makers.contains(&clip.producer) {
-                    makers.push(clip.producer.clone());
+        if second {
+            let mut variants: BTreeMap<String, (Vec<String>, Vec<String>)> = BTreeMap::new();
+            for clip in self.new_clips.iter().filter(|n| n.correctable) {
+                if let Some(group) = clip.sources.first().map(|s| class_of(s)) {
+                    let (clips, makers) = variants.entry(group).or_default();
+                    clips.push(clip.name.clone());
+                    if !makers.contains(&clip.producer) {
+                        makers.push(clip.producer.clone());
+                    }
                 }
             }
-        }
-        for (group, (clips, makers)) in variants {
-            self.jobs
-                .push(variant_tracker_job(&group, clips, makers, seed, c));
+            for (group, (clips, makers)) in variants {
+                let job_seed = job_seed(seed, &variant_tracker_key(&group));
+                self.jobs
+                    .push(variant_tracker_job(&group, clips, makers, job_seed, c));
+            }
         }
         let mut corrected = Vec::new();
         for clip in self.new_clips.iter().filter(|n| n.correctable) {
@@ -564,8 +568,9 @@ pub fn variant_tracker_key(group: &str) -> String {
     format!("variant_tracker:{group}")
 }
 
-/// The `variant_tracker` job of class `group`: its new `clips`, made by the
-/// jobs `makers`, judged by the class tracker, those it fails trained on.
+/// The `variant_tracker` job of class `group`, with seed `seed`: its new
+/// `clips`, made by the jobs `makers`, judged by the class tracker, those it
+/// fails trained on.
 fn variant_tracker_job(
     group: &str,
     clips: Vec<String>,
@@ -573,17 +578,16 @@ fn variant_tracker_job(
     seed: u64,
     step: &CorrectStep,
 ) -> PlannedJob {
-    let key = variant_tracker_key(group);
     let mut deps = vec![tracker_key(group)];
     deps.extend(makers);
     PlannedJob {
+        key: variant_tracker_key(group),
         kind: JobKind::VariantTracker {
             group: group.to_string(),
             clips,
-            seed: job_seed(seed, &key),
+            seed,
             step: step.clone(),
         },
-        key,
         deps,
         outputs: vec![],
         finishes: false,
@@ -694,11 +698,14 @@ pub fn corrections(
     }
     let second = tracker.is_some() && step.variant_tracker_iterations > 0 && !clips.is_empty();
     if second {
-        let mut job = variant_tracker_job("class", clips.to_vec(), vec![], 0, step);
-        if let JobKind::VariantTracker { seed, .. } = &mut job.kind {
-            *seed = seed_of("variant_tracker");
-        }
-        jobs.push(job);
+        let seed = seed_of("variant_tracker");
+        jobs.push(variant_tracker_job(
+            "class",
+            clips.to_vec(),
+            vec![],
+            seed,
+            step,
+        ));
     }
     for clip in clips {
         let (sources, deps) = match &tracker {

@@ -449,7 +449,7 @@ impl Inputs for State<'_> {
         }
         let judged = correct::ClassReport::read(&judged)?;
         let second = dir.join(correct::class::REPORT_FILE).is_file();
-        Ok(crate::stages::VariantTracker::starts_from_second(&judged, second, clip).then_some(dir))
+        Ok((second && crate::stages::VariantTracker::failed_as_is(&judged, clip)).then_some(dir))
     }
 }
 

@@ -204,9 +204,7 @@ pub fn correct_with_config(
     config.warm_start = warm_start
         .filter(|d| ppo::latest_checkpoint(d).ok().flatten().is_some())
         .map(Path::to_path_buf);
-    let resume = ppo::latest_checkpoint(&dir.join("checkpoints"))
-        .map_err(correct::CorrectError::from)?
-        .is_some();
+    let resume = has_checkpoint(&dir.join("checkpoints"))?;
     let outcome = correct::correct(motion, name, &config, dir, resume, on_progress)?;
     motion::io::write_atomic(
         &dir.join(EXACT),
@@ -260,9 +258,7 @@ pub fn train_tracker(
     if let Some(done) = reuse_class(dir)? {
         return Ok(done);
     }
-    let resume = ppo::latest_checkpoint(&correct::class::checkpoints_of(dir))
-        .map_err(correct::CorrectError::from)?
-        .is_some();
+    let resume = has_checkpoint(&correct::class::checkpoints_of(dir))?;
     Ok(correct::train_class(clips, config, dir, resume, |p| {
         on_progress(&class_progress(p))
     })?)
@@ -283,14 +279,14 @@ pub struct VariantTracker {
 }
 
 impl VariantTracker {
-    /// Whether new clip `clip` starts its correction from the second tracker
-    /// (the class tracker failed it as is, and a second one was trained).
-    pub fn starts_from_second(judged: &correct::ClassReport, second: bool, clip: &str) -> bool {
-        second
-            && judged
-                .verdicts
-                .iter()
-                .any(|v| v.name == clip && !v.accepted)
+    /// Whether the class tracker failed new clip `clip` as is (in `judged`,
+    /// its verdicts): such a clip starts its correction from the second
+    /// tracker, when one was trained.
+    pub fn failed_as_is(judged: &correct::ClassReport, clip: &str) -> bool {
+        judged
+            .verdicts
+            .iter()
+            .any(|v| v.name == clip && !v.accepted)
     }
 }
 
@@ -323,21 +319,16 @@ pub fn train_variant_tracker(
         ..correct::ClassConfig::default()
     };
     let judged_dir = dir.join(JUDGED_DIR);
-    let has_checkpoint = |d: &Path| -> Result<bool, PipelineError> {
-        Ok(ppo::latest_checkpoint(&correct::class::checkpoints_of(d))
-            .map_err(correct::CorrectError::from)?
-            .is_some())
-    };
     let judged = match reuse_class(&judged_dir)? {
         Some(done) => done,
         None => {
-            let resume = has_checkpoint(&judged_dir)?;
+            let resume = has_checkpoint(&correct::class::checkpoints_of(&judged_dir))?;
             correct::train_class(clips, &from(0), &judged_dir, resume, |_| {})?
         }
     };
     let failed: Vec<(String, Motion)> = clips
         .iter()
-        .filter(|(name, _)| VariantTracker::starts_from_second(&judged, true, name))
+        .filter(|(name, _)| VariantTracker::failed_as_is(&judged, name))
         .cloned()
         .collect();
     tracing::info!(
@@ -354,7 +345,7 @@ pub fn train_variant_tracker(
     let second = match reuse_class(dir)? {
         Some(done) => done,
         None => {
-            let resume = has_checkpoint(dir)?;
+            let resume = has_checkpoint(&correct::class::checkpoints_of(dir))?;
             correct::train_class(&failed, &from(iterations), dir, resume, |p| {
                 on_progress(&class_progress(p))
             })?
@@ -364,6 +355,14 @@ pub fn train_variant_tracker(
         judged,
         second: Some(second),
     })
+}
+
+/// Whether the `checkpoints` folder of an interrupted training holds a
+/// checkpoint to resume from.
+fn has_checkpoint(checkpoints: &Path) -> Result<bool, PipelineError> {
+    Ok(ppo::latest_checkpoint(checkpoints)
+        .map_err(correct::CorrectError::from)?
+        .is_some())
 }
 
 /// The report of a class tracker already trained in `dir`, if there is one.

@@ -219,10 +219,6 @@ impl TrainedVae {
         })
     }
 
-    /// `count` clips; codes from `prior` (see [`TrainedVae::sample_decoded`]),
-    /// each with its root path re-integrated from its planted feet
-    /// (`motion::metrics::plant_root`), so that the root goes where the legs
-    /// step. The same seed gives the same clips.
     /// The model with near codes drawn between `members` training clips of
     /// a cluster instead of the number it was trained with
     /// ([`crate::NearConfig::members`]).
@@ -236,6 +232,10 @@ impl TrainedVae {
         Ok(self)
     }
 
+    /// `count` clips; codes from `prior` (see [`TrainedVae::sample_decoded`]),
+    /// each with its root path re-integrated from its planted feet
+    /// (`motion::metrics::plant_root`), so that the root goes where the legs
+    /// step. The same seed gives the same clips.
     pub fn sample(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
         let th = motion::metrics::Thresholds::default();
         let mut samples = self.sample_decoded(count, prior, seed)?;

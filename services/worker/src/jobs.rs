@@ -445,7 +445,7 @@ impl pipeline::Inputs for HttpInputs<'_> {
             .map_err(|e| PipelineError::Job(format!("{file}: {e}")))?;
         let report_file = artifacts::variant_tracker_report(group);
         let second = self.dep(&key)?.work.contains(&report_file);
-        if !pipeline::stages::VariantTracker::starts_from_second(&judged, second, clip) {
+        if !(second && pipeline::stages::VariantTracker::failed_as_is(&judged, clip)) {
             return Ok(None);
         }
         let report = self.dep_file(&key, &report_file)?;

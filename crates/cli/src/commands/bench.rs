@@ -452,9 +452,7 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 .map(|(name, motion)| {
                     let start = match &second {
                         Some((second, judged))
-                            if pipeline::stages::VariantTracker::starts_from_second(
-                                judged, true, &name,
-                            ) =>
+                            if pipeline::stages::VariantTracker::failed_as_is(judged, &name) =>
                         {
                             Some(second)
                         }
