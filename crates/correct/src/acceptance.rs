@@ -247,7 +247,7 @@ pub fn judge(
             "mean root residual force as a fraction of body weight".into(),
         ),
         Criterion::new(
-            "foot_skating",
+            FOOT_SKATING,
             after.foot_skating_m_s,
             skating_limit,
             true,
@@ -271,6 +271,9 @@ pub fn judge(
         ),
     ]
 }
+
+/// The name of the foot skating criterion.
+pub const FOOT_SKATING: &str = "foot_skating";
 
 /// Whether every criterion passed.
 pub fn all_passed(criteria: &[Criterion]) -> bool {

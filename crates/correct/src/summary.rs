@@ -38,6 +38,9 @@ pub struct ClassSummary {
     pub mean_wall_s: f64,
     pub total_wall_s: f64,
     pub mean_samples: f64,
+    /// Clips trained with the sole reward's sliding term.
+    #[serde(default)]
+    pub sliding_term: usize,
 }
 
 impl ClassSummary {
@@ -78,6 +81,7 @@ impl ClassSummary {
             mean_wall_s: mean(&|r| r.wall_s),
             total_wall_s: reports.iter().map(|r| r.wall_s).sum(),
             mean_samples: mean(&|r| r.samples as f64),
+            sliding_term: reports.iter().filter(|r| r.skate_scale_m_s > 0.0).count(),
         }
     }
 }

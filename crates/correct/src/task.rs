@@ -76,6 +76,14 @@ impl ImitationTask {
         }
     }
 
+    /// Turn the sole reward's sliding term on (or off, 0) in every clip's
+    /// environment.
+    pub fn set_skate_scale(&mut self, m_s: f32) {
+        for env in &mut self.clips {
+            env.set_skate_scale(m_s);
+        }
+    }
+
     fn env_mut(&mut self) -> &mut ImitationEnv {
         &mut self.clips[self.current]
     }

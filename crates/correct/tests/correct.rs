@@ -24,6 +24,8 @@ fn tiny(max_iterations: u64) -> CorrectConfig {
         max_iterations: Some(max_iterations),
         target_r_norm: None,
         checkpoint_every_s: 0.0,
+        // Off unless a test turns it on.
+        skate_scale_when_skating_m_s: 0.0,
         ..CorrectConfig::default()
     };
     config.ppo.policy.hidden = vec![32, 32];
@@ -125,6 +127,32 @@ fn short_job_writes_honest_outputs_and_resumes() {
     assert_eq!(resumed.report.iterations, 3);
     assert!(resumed.report.samples > report.samples);
     assert_eq!(resumed.report.curve[..3], report.curve[..]);
+}
+
+/// The sliding term for clips that skate also switches on during training:
+/// a rollout that reaches the R_norm target but skates turns it on for the
+/// rest of the job.
+#[test]
+fn a_rollout_that_skates_during_training_switches_the_sliding_term_on() {
+    let run = |scale: f32| {
+        let mut config = tiny(2);
+        config.target_r_norm = Some(0.0);
+        config.acceptance.max_foot_skating_m_s = 0.0;
+        config.skate_scale_when_skating_m_s = scale;
+        let dir = tempfile::tempdir().unwrap();
+        correct(&kick(), "kick", &config, dir.path(), false, |_| {})
+            .unwrap()
+            .report
+    };
+    let (on, off) = (run(0.1), run(0.0));
+    assert!(
+        (on.skate_scale_m_s - 0.1).abs() < 1e-6,
+        "{}",
+        on.skate_scale_m_s
+    );
+    assert_eq!(off.skate_scale_m_s, 0.0);
+    assert_eq!(on.iterations, 2, "it skates, so it is not accepted early");
+    assert_ne!(on.r_norm, off.r_norm, "the term changed nothing");
 }
 
 /// The untrained tracker (action 0) keeps the kick up only with the root
@@ -303,6 +331,40 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
     .unwrap();
     assert!(out.report.warm_start.is_some());
     assert!((out.report.residual_scale - report.residual_scale).abs() < 1e-6);
+    assert_eq!(out.report.skate_scale_m_s, 0.0, "the sliding term is off");
+
+    // The sliding term for clips that skate: on only when the tracker's
+    // clip fails the skating criterion as is (a cap of 0 m/s fails it, one
+    // of 100 m/s that ignores the input passes it; the R_norm target of 1 is
+    // not met, so every run fine-tunes); it changes what training learns,
+    // and a resumed job keeps it.
+    let sliding = |cap: f64, iterations: u64, name: &str, resume: bool| {
+        let mut c = report.warm_config(&tiny(iterations), &class_dir);
+        c.target_r_norm = Some(1.0);
+        c.acceptance.max_foot_skating_m_s = cap;
+        c.acceptance.skating_at_most_input = false;
+        c.skate_scale_when_skating_m_s = 0.1;
+        correct(&kick(), "kick", &c, &dir.path().join(name), resume, |_| {})
+            .unwrap()
+            .report
+    };
+    let skates = sliding(0.0, 2, "skates", false);
+    let glides = sliding(100.0, 2, "glides", false);
+    assert!(
+        (skates.skate_scale_m_s - 0.1).abs() < 1e-6,
+        "{}",
+        skates.skate_scale_m_s
+    );
+    assert_eq!(glides.skate_scale_m_s, 0.0);
+    assert_ne!(skates.r_norm, glides.r_norm, "the term changed nothing");
+    sliding(0.0, 1, "resumed", false);
+    let resumed = sliding(100.0, 2, "resumed", true);
+    assert!(
+        (resumed.skate_scale_m_s - 0.1).abs() < 1e-6,
+        "resume lost the term"
+    );
+    assert_eq!(resumed.iterations, 2);
+    assert_eq!(resumed.r_norm, skates.r_norm, "resumed without the term");
 
     // A per-clip policy (no tracker observation) cannot start from it.
     let mut wrong = warm.clone();

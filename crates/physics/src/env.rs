@@ -428,6 +428,18 @@ impl ImitationEnv {
         self.residual_scale
     }
 
+    /// Turn the sole reward's sliding term on at speed scale `m_s` (0 or not
+    /// finite: off), as [`Config::skate_scale_m_s`] does from the start; a
+    /// correction job switches it on for clips whose first judgement skates.
+    /// Takes effect at the next step.
+    pub fn set_skate_scale(&mut self, m_s: f32) {
+        self.config.skate_scale_m_s = if m_s.is_finite() { m_s.max(0.0) } else { 0.0 };
+    }
+
+    pub fn skate_scale(&self) -> f32 {
+        self.config.skate_scale_m_s
+    }
+
     /// Turn recording of simulated frames on or off (on by default).
     pub fn set_recording(&mut self, on: bool) {
         self.record = on;

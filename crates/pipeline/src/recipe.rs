@@ -37,6 +37,8 @@
 //! tracker_iterations = 150  #   and its PPO iterations at most (optional)
 //! variant_tracker_iterations = 300  # new clips the class tracker fails start from a
 //!                           #   second tracker trained on them (0 = off)
+//! skate_scale_when_skating_m_s = 0.1  # a clip that skates is trained with a
+//!                           #   sliding term from then on (0 = off)
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
@@ -188,6 +190,11 @@ pub struct CorrectStep {
     /// jog VAE samples accepted 2/34 -> 8/34 (bench correction); kick (eval
     /// table, fold bd) IK edits 33/46 -> 43/46, VAE samples 11/46 -> 25/46.
     pub variant_tracker_iterations: u64,
+    /// Train a clip with the sole reward's sliding term at this speed scale,
+    /// m/s, from the first judgement at which it skates (its starting policy
+    /// as is, or a rollout at the R_norm target) on (0 = never;
+    /// `correct::CorrectConfig::skate_scale_when_skating_m_s`).
+    pub skate_scale_when_skating_m_s: f32,
 }
 
 /// See [`CorrectStep::policy`].
@@ -242,6 +249,7 @@ impl Default for CorrectStep {
                 .physics
                 .tracker_frames,
             variant_tracker_iterations: 0,
+            skate_scale_when_skating_m_s: c.skate_scale_when_skating_m_s,
         }
     }
 }
@@ -263,6 +271,7 @@ impl CorrectStep {
             },
             envs: self.envs,
             seed,
+            skate_scale_when_skating_m_s: self.skate_scale_when_skating_m_s,
             ..correct::CorrectConfig::default()
         };
         c.physics.residual = self.residual.physics();

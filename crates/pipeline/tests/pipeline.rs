@@ -625,6 +625,8 @@ fn new_clips_the_class_tracker_fails_start_from_a_second_tracker() {
     assert_eq!(again.manifest, summary.manifest);
     let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\nvariant_tracker_iterations = 5\n");
     assert!(e.contains("variant_tracker_iterations"), "{e}");
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\nskate_scale_when_skating_m_s = -1\n");
+    assert!(e.contains("skate scale -1"), "{e}");
 }
 
 /// Every numeric field the tables' crates leave open has an upper bound:

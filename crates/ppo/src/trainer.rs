@@ -45,6 +45,11 @@ pub struct Progress {
     /// Wall time spent in this job so far, across resumes.
     pub wall_s: f64,
     pub curve: Vec<CurvePoint>,
+    /// Facts about the run that a resume must know and the trainer does not
+    /// (e.g. a reward term the caller switched on part-way): saved with the
+    /// checkpoint, read back on resume, never interpreted here.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub notes: std::collections::BTreeMap<String, String>,
 }
 
 /// What one iteration did.
@@ -422,6 +427,11 @@ impl<E: Env> Trainer<E> {
 
     pub fn progress(&self) -> &Progress {
         &self.progress
+    }
+
+    /// Record a fact about the run in its checkpoints ([`Progress::notes`]).
+    pub fn set_note(&mut self, key: &str, value: String) {
+        self.progress.notes.insert(key.to_string(), value);
     }
 
     pub fn policy(&self) -> &GaussianPolicy {

@@ -169,6 +169,12 @@ struct CorrectionArgs {
     /// Speed scale of the sole reward's sliding term, m/s (0 = off).
     #[arg(long, default_value_t = correct::CorrectConfig::default().physics.skate_scale_m_s)]
     skate_scale: f32,
+    /// Switch the sliding term on at this speed scale, m/s, only for a clip
+    /// that skates: from the first judgement that fails the skating criterion
+    /// (the warm-started policy as is, or a rollout at the R_norm target)
+    /// to the end of its training (0 = never).
+    #[arg(long, default_value_t = correct::CorrectConfig::default().skate_scale_when_skating_m_s)]
+    skate_scale_when_skating: f32,
     /// Imitate each clip's root re-integrated from its planted feet
     /// (`physics::Config::plant_reference`) instead of as captured.
     #[arg(long)]
@@ -217,6 +223,7 @@ fn base_config(args: &CorrectionArgs) -> correct::CorrectConfig {
     config.physics.character.calibrate_feet = !args.rest_feet;
     config.physics.sole_reward_weight = args.sole_reward_weight;
     config.physics.skate_scale_m_s = args.skate_scale;
+    config.skate_scale_when_skating_m_s = args.skate_scale_when_skating;
     config.physics.plant_reference = args.plant_reference;
     config.residual_schedule = correct::ResidualSchedule {
         start_scale: 1.0,

@@ -50,6 +50,12 @@ pub struct Args {
     /// Speed scale of the sole reward's sliding term, m/s (0 = off).
     #[arg(long, default_value_t = CorrectConfig::default().physics.skate_scale_m_s)]
     skate_scale: f32,
+    /// Switch the sliding term on at this speed scale, m/s, only for a clip
+    /// that skates: from the first judgement that fails the skating criterion
+    /// (the warm-started policy as is, or a rollout at the R_norm target)
+    /// to the end of its training (0 = never).
+    #[arg(long, default_value_t = CorrectConfig::default().skate_scale_when_skating_m_s)]
+    skate_scale_when_skating: f32,
     /// Parallel simulated environments.
     #[arg(long, default_value_t = CorrectConfig::default().envs)]
     envs: usize,
@@ -100,6 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.physics.residual = args.residual;
     config.physics.sole_reward_weight = args.sole_reward_weight;
     config.physics.skate_scale_m_s = args.skate_scale;
+    config.skate_scale_when_skating_m_s = args.skate_scale_when_skating;
     config.warm_start = args.warm_start.clone();
     config.physics.character.calibrate_feet = !args.rest_feet;
     config.physics.plant_reference = args.plant_reference;

@@ -485,6 +485,11 @@ struct PhysicsArgs {
     /// iterations (--correct-policy class); 0 = off.
     #[arg(long, default_value_t = PhysicsConfig::default().variant_tracker_iterations)]
     variant_tracker_iterations: u64,
+    /// A clip that skates (its starting policy as is, or a rollout at the
+    /// R_norm target) is trained with the sole reward's sliding term at this
+    /// speed scale, m/s, from then on; 0 = never.
+    #[arg(long, default_value_t = PhysicsConfig::default().skate_scale_when_skating_m_s)]
+    skate_scale_when_skating: f32,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -576,6 +581,7 @@ impl TableArgs {
                 tracker_budget_s: p.tracker_budget_s,
                 clip_iterations: p.clip_iterations,
                 variant_tracker_iterations: p.variant_tracker_iterations,
+                skate_scale_when_skating_m_s: p.skate_scale_when_skating,
             },
         }
     }

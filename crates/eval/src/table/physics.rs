@@ -59,6 +59,13 @@ pub struct PhysicsConfig {
     /// config's JSON when 0, so tables saved before it existed still resume.
     #[serde(skip_serializing_if = "is_zero")]
     pub variant_tracker_iterations: u64,
+    /// A clip that skates is trained with the sole reward's sliding term at
+    /// this speed scale, m/s, from then on (`[correct]
+    /// skate_scale_when_skating_m_s`, the same default); 0 = never. Tables
+    /// saved before it existed read as 0 (their cells were computed without
+    /// it) and are recomputed under the new default.
+    #[serde(default)]
+    pub skate_scale_when_skating_m_s: f32,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -78,6 +85,8 @@ impl Default for PhysicsConfig {
             tracker_budget_s: 6000.0,
             clip_iterations: 15,
             variant_tracker_iterations: 0,
+            skate_scale_when_skating_m_s: correct::CorrectConfig::default()
+                .skate_scale_when_skating_m_s,
         }
     }
 }
@@ -93,6 +102,12 @@ impl PhysicsConfig {
             return Err(EvalError::Config(
                 "a second tracker (variant tracker iterations) needs the class policy".into(),
             ));
+        }
+        let skate = self.skate_scale_when_skating_m_s;
+        if !(skate.is_finite() && skate >= 0.0) {
+            return Err(EvalError::Config(format!(
+                "the sliding term's speed scale {skate} m/s is not >= 0"
+            )));
         }
         if !(self.correct_budget_s.is_finite() && self.correct_budget_s > 0.0) {
             return Err(EvalError::Config(
@@ -375,6 +390,7 @@ pub fn correct_and_debias(
         tracker_iterations: Some(config.tracker_iterations),
         tracker_budget_s: config.tracker_budget_s,
         variant_tracker_iterations: config.variant_tracker_iterations,
+        skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
         ..pipeline::CorrectStep::default()
     };
     let debias = debias::TrainConfig {
