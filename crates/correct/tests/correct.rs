@@ -129,6 +129,14 @@ fn short_job_writes_honest_outputs_and_resumes() {
     assert_eq!(resumed.report.curve[..3], report.curve[..]);
 }
 
+/// Limits every criterion but skating (and falls) passes, so that skating is
+/// the one criterion left to fail.
+fn relax_all_but_skating(config: &mut CorrectConfig) {
+    config.acceptance.min_mean_reward = 0.0;
+    config.acceptance.max_residual_force_ratio = 100.0;
+    config.acceptance.min_flat_fraction = 0.0;
+}
+
 /// The sliding term for clips that skate also switches on during training:
 /// a rollout that reaches the R_norm target but skates turns it on for the
 /// rest of the job.
@@ -138,6 +146,7 @@ fn a_rollout_that_skates_during_training_switches_the_sliding_term_on() {
         let mut config = tiny(2);
         config.target_r_norm = Some(0.0);
         config.acceptance.max_foot_skating_m_s = 0.0;
+        relax_all_but_skating(&mut config);
         config.skate_scale_when_skating_m_s = scale;
         let dir = tempfile::tempdir().unwrap();
         correct(&kick(), "kick", &config, dir.path(), false, |_| {})
@@ -333,16 +342,18 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
     assert!((out.report.residual_scale - report.residual_scale).abs() < 1e-6);
     assert_eq!(out.report.skate_scale_m_s, 0.0, "the sliding term is off");
 
-    // The sliding term for clips that skate: on only when the tracker's
-    // clip fails the skating criterion as is (a cap of 0 m/s fails it, one
-    // of 100 m/s that ignores the input passes it; the R_norm target of 1 is
-    // not met, so every run fine-tunes); it changes what training learns,
-    // and a resumed job keeps it.
+    // The sliding term for clips that skate: on only when skating is the
+    // one criterion the tracker's clip fails as is (a cap of 0 m/s fails
+    // it, one of 100 m/s that ignores the input passes it; the R_norm
+    // target of 1 is not met, so every run fine-tunes); it changes what
+    // training learns, and a resumed job keeps it. With another criterion
+    // failing too it stays off.
     let sliding = |cap: f64, iterations: u64, name: &str, resume: bool| {
         let mut c = report.warm_config(&tiny(iterations), &class_dir);
         c.target_r_norm = Some(1.0);
         c.acceptance.max_foot_skating_m_s = cap;
         c.acceptance.skating_at_most_input = false;
+        relax_all_but_skating(&mut c);
         c.skate_scale_when_skating_m_s = 0.1;
         correct(&kick(), "kick", &c, &dir.path().join(name), resume, |_| {})
             .unwrap()
@@ -365,6 +376,22 @@ fn a_class_tracker_judges_every_clip_and_warm_starts_a_clip() {
     );
     assert_eq!(resumed.iterations, 2);
     assert_eq!(resumed.r_norm, skates.r_norm, "resumed without the term");
+    let mut strict = report.warm_config(&tiny(1), &class_dir);
+    strict.target_r_norm = Some(1.0);
+    strict.acceptance.max_foot_skating_m_s = 0.0;
+    strict.acceptance.max_residual_force_ratio = 0.0;
+    strict.skate_scale_when_skating_m_s = 0.1;
+    let both = correct(
+        &kick(),
+        "kick",
+        &strict,
+        &dir.path().join("both"),
+        false,
+        |_| {},
+    )
+    .unwrap()
+    .report;
+    assert_eq!(both.skate_scale_m_s, 0.0, "{:?}", both.rejected_because);
 
     // A per-clip policy (no tracker observation) cannot start from it.
     let mut wrong = warm.clone();

@@ -191,8 +191,8 @@ pub struct CorrectStep {
     /// table, fold bd) IK edits 33/46 -> 43/46, VAE samples 11/46 -> 25/46.
     pub variant_tracker_iterations: u64,
     /// Train a clip with the sole reward's sliding term at this speed scale,
-    /// m/s, from the first judgement at which it skates (its starting policy
-    /// as is, or a rollout at the R_norm target) on (0 = never;
+    /// m/s, from the first judgement at which skating is all it fails (its
+    /// starting policy as is, or a rollout at the R_norm target) on (0 = never;
     /// `correct::CorrectConfig::skate_scale_when_skating_m_s`).
     pub skate_scale_when_skating_m_s: f32,
 }

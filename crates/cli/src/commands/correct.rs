@@ -51,9 +51,9 @@ pub struct Args {
     #[arg(long, default_value_t = CorrectConfig::default().physics.skate_scale_m_s)]
     skate_scale: f32,
     /// Switch the sliding term on at this speed scale, m/s, only for a clip
-    /// that skates: from the first judgement that fails the skating criterion
-    /// (the warm-started policy as is, or a rollout at the R_norm target)
-    /// to the end of its training (0 = never).
+    /// that skates: from the first judgement at which skating is the one
+    /// criterion failed (the warm-started policy as is, or a rollout at the
+    /// R_norm target) to the end of its training (0 = never).
     #[arg(long, default_value_t = CorrectConfig::default().skate_scale_when_skating_m_s)]
     skate_scale_when_skating: f32,
     /// Parallel simulated environments.
