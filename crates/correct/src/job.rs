@@ -531,8 +531,7 @@ fn criteria(
 /// first judgement at which skating is the one criterion failed (the
 /// warm-started policy's before any training, or one during training, which
 /// judges only rollouts that reach the R_norm target), then on for the rest
-/// of the job;
-/// kept in the checkpoints' notes so that a resumed job (on another worker
+/// of the job; kept in the checkpoints' notes so that a resumed job (on another worker
 /// too) trains with the same reward.
 struct SlidingTerm;
 
@@ -545,11 +544,12 @@ impl SlidingTerm {
         criteria: &[Criterion],
     ) {
         let scale = config.skate_scale_when_skating_m_s;
-        let skates = criteria
+        let failed: Vec<&str> = criteria
             .iter()
             .filter(|c| !c.passed)
-            .all(|c| c.name == crate::acceptance::FOOT_SKATING)
-            && criteria.iter().any(|c| !c.passed);
+            .map(|c| c.name.as_str())
+            .collect();
+        let skates = failed == [crate::acceptance::FOOT_SKATING];
         let off = config.physics.skate_scale_m_s == 0.0 && Self::of(trainer).is_none();
         if scale > 0.0 && off && skates {
             tracing::info!(

@@ -63,8 +63,8 @@ pub struct Report {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub soles_flat_before: Option<f64>,
     /// Speed scale of the sole reward's sliding term the policy was trained
-    /// with, m/s (0: off): set for every clip, or switched on for a clip that
-    /// skated as warm-started (`CorrectConfig::skate_scale_when_skating_m_s`).
+    /// with, m/s (0: off): set for every clip, or switched on for a clip once
+    /// skating was all it failed (`CorrectConfig::skate_scale_when_skating_m_s`).
     #[serde(default)]
     pub skate_scale_m_s: f64,
 }

@@ -37,8 +37,8 @@
 //! tracker_iterations = 150  #   and its PPO iterations at most (optional)
 //! variant_tracker_iterations = 300  # new clips the class tracker fails start from a
 //!                           #   second tracker trained on them (0 = off)
-//! skate_scale_when_skating_m_s = 0.1  # a clip that skates is trained with a
-//!                           #   sliding term from then on (0 = off)
+//! skate_scale_when_skating_m_s = 0.1  # a clip failing on skating alone trains
+//!                           #   with a sliding term from then on (0 = off)
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000

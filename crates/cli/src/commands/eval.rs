@@ -485,9 +485,9 @@ struct PhysicsArgs {
     /// iterations (--correct-policy class); 0 = off.
     #[arg(long, default_value_t = PhysicsConfig::default().variant_tracker_iterations)]
     variant_tracker_iterations: u64,
-    /// A clip that skates (its starting policy as is, or a rollout at the
-    /// R_norm target) is trained with the sole reward's sliding term at this
-    /// speed scale, m/s, from then on; 0 = never.
+    /// A clip that fails on skating alone (its starting policy as is, or a
+    /// rollout at the R_norm target) is trained with the sole reward's
+    /// sliding term at this speed scale, m/s, from then on; 0 = never.
     #[arg(long, default_value_t = PhysicsConfig::default().skate_scale_when_skating_m_s)]
     skate_scale_when_skating: f32,
 }

@@ -59,8 +59,8 @@ pub struct PhysicsConfig {
     /// config's JSON when 0, so tables saved before it existed still resume.
     #[serde(skip_serializing_if = "is_zero")]
     pub variant_tracker_iterations: u64,
-    /// A clip that skates is trained with the sole reward's sliding term at
-    /// this speed scale, m/s, from then on (`[correct]
+    /// A clip that fails on skating alone is trained with the sole reward's
+    /// sliding term at this speed scale, m/s, from then on (`[correct]
     /// skate_scale_when_skating_m_s`, the same default); 0 = never. Tables
     /// saved before it existed read as 0 (their cells were computed without
     /// it) and are recomputed under the new default.
