@@ -45,6 +45,35 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         !bad.status.success(),
         "sampling from a non-model directory must fail"
     );
+    // Reconstructions: one clip per input, at the model's 30 fps, as long as
+    // the input's duration.
+    let recon = dir.path().join("recon");
+    ok(motionaug(&[
+        "vae",
+        "reconstruct",
+        model_s,
+        "examples/data/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc",
+        "--skeleton",
+        "examples/data/HDM_bd.asf",
+        "--plant-root",
+        "--out",
+        recon.to_str().unwrap(),
+    ]));
+    let input = motion::io::load(
+        &example("HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"),
+        &motion::io::LoadOptions {
+            skeleton: Some(example("HDM_bd.asf")),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let name = "HDM_bd_jogLeftCircle4StepsRstart_001_120_recon";
+    let m = motion::io::load(&recon.join(format!("{name}.npz")), &Default::default()).unwrap();
+    assert!(recon.join(format!("{name}.bvh")).is_file());
+    assert_eq!(m.fps(), 30.0);
+    let seconds = |m: &motion::Motion| (m.frames() - 1) as f64 / m.fps();
+    assert!((seconds(&m) - seconds(&input)).abs() < 0.1);
+    failed(motionaug(&["vae", "reconstruct", model_s, "--out", out_s]));
 }
 
 #[test]

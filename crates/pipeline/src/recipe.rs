@@ -15,6 +15,7 @@
 //! iterations = 1500
 //! prior = "near"            # near | normal
 //! near_members = 2          # near codes between this many clips of a cluster
+//! mixed_motion_weight = 0.0 # > 0: codes between clips decode to motion as fast as theirs
 //!
 //! [interaction]             # every pair <stem>_A / <stem>_B: `copies` body-size variations of B
 //! copies = 4
@@ -73,6 +74,11 @@ pub struct VaeStep {
     /// Near codes are drawn between this many training clips of a cluster
     /// (`vae::NearConfig::members`; the paper's 2).
     pub near_members: usize,
+    /// Weight of the training term that asks codes between two clips to decode
+    /// to motion as fast as theirs (`vae::LossWeights::mixed_motion`; 0: off).
+    /// Samples then move like the class instead of standing nearly still, but
+    /// on jog fewer pass physical correction (crates/vae/README.md, session 18).
+    pub mixed_motion_weight: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -92,6 +98,7 @@ impl Default for VaeStep {
             adversarial: true,
             min_clips: 2,
             near_members: vae::NearConfig::default().members,
+            mixed_motion_weight: 0.0,
         }
     }
 }
@@ -591,6 +598,12 @@ impl Recipe {
                 return Err(err("[vae]", "`near_members` must be at least 1"));
             }
             bounds::VAE_NEAR_MEMBERS.check(v.near_members as f64)?;
+            if !(v.mixed_motion_weight.is_finite() && v.mixed_motion_weight >= 0.0) {
+                return Err(err(
+                    "[vae]",
+                    "`mixed_motion_weight` must be a finite number >= 0",
+                ));
+            }
             if v.min_clips == 0 {
                 return Err(err("[vae]", "`min_clips` must be at least 1"));
             }

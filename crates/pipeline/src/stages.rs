@@ -74,6 +74,7 @@ pub fn vae(
         ..vae::TrainConfig::default()
     };
     config.near.members = step.near_members;
+    config.weights.mixed_motion = step.mixed_motion_weight;
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
     let model = vae::train(&motions, &config, |_| {})?;
     let samples = model.sample(step.copies as usize, step.prior, seed)?;

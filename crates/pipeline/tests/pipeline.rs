@@ -100,6 +100,11 @@ fn recipes_are_validated_with_the_table_and_field_named() {
     );
     let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\naccept_threshold = 2\n");
     assert!(e.contains("accept_threshold"), "{e}");
+    let e = recipe_err("[vae]\nmixed_motion_weight = -0.5\n");
+    assert!(
+        e.contains("[vae]") && e.contains("mixed_motion_weight"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -159,6 +159,28 @@ impl FootKinematics {
         }))
     }
 
+    /// Forward kinematics of every joint's own position (no end sites): what
+    /// the pose speed metric (`motion::metrics::Plausibility::pose_speed_m_s`)
+    /// watches.
+    pub fn all_joints(skeleton: &Skeleton) -> Result<Self> {
+        let mut chain = Vec::with_capacity(skeleton.len());
+        for j in 0..skeleton.len() {
+            chain.push(ChainJoint {
+                joint: j,
+                // Joints are in topological order: the parent's index is its own.
+                parent: skeleton.parent(j),
+                offset: row(skeleton.joint(j).offset)?,
+            });
+        }
+        let columns: Vec<u32> = (0..6 * skeleton.len()).map(|k| (3 + k) as u32).collect();
+        Ok(FootKinematics {
+            joints: skeleton.len(),
+            points: (0..skeleton.len()).map(|c| (c, None)).collect(),
+            chain,
+            columns: Tensor::from_vec(columns, 6 * skeleton.len(), &Device::Cpu)?,
+        })
+    }
+
     pub fn points(&self) -> usize {
         self.points.len()
     }
@@ -205,6 +227,24 @@ impl FootKinematics {
         }
         Ok(Tensor::cat(&out, 1)?.reshape((b, t, self.points.len(), 3))?)
     }
+}
+
+/// Pose speed of each clip `(B,)`, m/s: the mean over valid steps and points
+/// of the speed of points `(B, T, P, 3)` relative to the root `(B, T, 3)` (how
+/// fast the body moves, not how fast it travels). A still pose has ~0 (a
+/// small epsilon keeps the gradient of a norm at 0 finite).
+pub fn pose_speed(pos: &Tensor, root: &Tensor, mask: &Tensor, fps: f64) -> Result<Tensor> {
+    let (b, t, _, _) = pos.dims4()?;
+    if t < 2 {
+        return Ok(Tensor::zeros(b, pos.dtype(), pos.device())?);
+    }
+    let rel = pos.broadcast_sub(&root.unsqueeze(2)?)?;
+    let speed = (velocities(&rel, fps)?.sqr()?.sum(D::Minus1)? + 1e-8)?
+        .sqrt()?
+        .mean(D::Minus1)?;
+    let m = step_mask(mask)?;
+    let n = m.sum(1)?.clamp(1.0, f64::INFINITY)?;
+    Ok(((speed * &m)?.sum(1)? / n)?)
 }
 
 /// Mean over valid frames of the squared distance between foot points `(B, T, P, 3)`.
@@ -265,6 +305,7 @@ pub fn floor(pos: &Tensor, mask: &Tensor) -> Result<Tensor> {
 mod tests {
     use super::*;
     use crate::features::{FeatureConfig, motion_to_frames};
+    use candle_core::DType;
     use motion::glam::{DQuat, DVec3};
     use motion::{Joint, Motion};
     use std::sync::Arc;
@@ -356,6 +397,59 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn every_joint_matches_forward_kinematics_and_a_still_pose_has_no_pose_speed() {
+        let m = random_motion(3);
+        let config = FeatureConfig::default();
+        let frames = motion_to_frames(&m, &config);
+        let canonical = crate::features::frames_to_motion(m.skeleton(), 30.0, &frames).unwrap();
+        let jk = FootKinematics::all_joints(m.skeleton()).unwrap();
+        assert_eq!(jk.points(), m.skeleton().len());
+        let dim = frames.len() / m.frames();
+        let raw = Tensor::from_vec(frames.clone(), (1, m.frames(), dim), &Device::Cpu).unwrap();
+        let pos = jk.positions(&raw).unwrap();
+        let got = pos.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let joints = m.skeleton().len();
+        for t in 0..m.frames() {
+            let x = canonical.world_transforms(t);
+            for j in 0..joints {
+                for (a, e) in got[(t * joints + j) * 3..(t * joints + j) * 3 + 3]
+                    .iter()
+                    .zip(x[j].translation.to_array())
+                {
+                    assert!((*a as f64 - e).abs() < 1e-4, "t {t} joint {j}: {a} vs {e}");
+                }
+            }
+        }
+        let mask = Tensor::ones((1, m.frames()), DType::F32, &Device::Cpu).unwrap();
+        let root = raw.narrow(2, 0, 3).unwrap();
+        let moving = pose_speed(&pos, &root, &mask, 30.0)
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap()[0];
+        assert!(moving > 1.0, "random poses 1/30 s apart: {moving} m/s");
+        // Every frame the first pose, the root still travelling: no pose speed.
+        let first = &frames[..dim];
+        let still: Vec<f32> = (0..m.frames())
+            .flat_map(|t| {
+                let mut f = first.to_vec();
+                f[0] += 0.1 * t as f32;
+                f
+            })
+            .collect();
+        let still = Tensor::from_vec(still, (1, m.frames(), dim), &Device::Cpu).unwrap();
+        let p = pose_speed(
+            &jk.positions(&still).unwrap(),
+            &still.narrow(2, 0, 3).unwrap(),
+            &mask,
+            30.0,
+        )
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap()[0];
+        assert!(p < 1e-3, "{p}");
     }
 
     #[test]

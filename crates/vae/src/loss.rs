@@ -25,6 +25,20 @@ pub struct LossWeights {
     /// reconstruction (0.27 rad mean joint error, worse than untrained), 0.001
     /// trains like no adversarial term (0.15 rad; README).
     pub adversarial: f64,
+    /// On the generator's adversarial terms for clips decoded from codes mixed
+    /// between two training clips (what sampling near samples decodes); with a
+    /// weight > 0 the discriminators also see those decodes as fakes. 0: the
+    /// discriminators judge reconstructions only (the training before session 18).
+    #[serde(default)]
+    pub mixed_adversarial: f64,
+    /// On the squared relative difference between a mixed-code decode's pose
+    /// speed (`feet::pose_speed`, every joint) and the mean of its two parent
+    /// clips'. A
+    /// decoder left alone renders most in-between codes as a nearly still pose
+    /// (crates/vae/README.md, session 16); this asks them to move as much as
+    /// the clips they were drawn between. 0: off.
+    #[serde(default)]
+    pub mixed_motion: f64,
 }
 
 impl Default for LossWeights {
@@ -33,6 +47,8 @@ impl Default for LossWeights {
             smooth: 0.001,
             kl: 0.01,
             adversarial: 0.001,
+            mixed_adversarial: 0.0,
+            mixed_motion: 0.0,
         }
     }
 }
@@ -45,6 +61,8 @@ impl LossWeights {
                 ("smooth", self.smooth),
                 ("kl", self.kl),
                 ("adversarial", self.adversarial),
+                ("mixed_adversarial", self.mixed_adversarial),
+                ("mixed_motion", self.mixed_motion),
             ],
         )
     }

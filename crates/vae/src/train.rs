@@ -6,9 +6,12 @@
 //! on), and step the generator (encoder + decoder) on reconstruction +
 //! smoothness + KL + the foot terms (`feet`: foot position and velocity of the
 //! reconstructions, skating of the mixed decodes, floor for both) (+ the
-//! adversarial hinge terms). With adversarial training the two discriminators then
-//! take one step on real clips vs the (detached) reconstructions, both in one
-//! batch. With Adam the rate follows a cosine down to `cosine_to` of itself.
+//! adversarial hinge terms) (+ the mixed-code terms: the pose speed of each
+//! mixed decode against its two parents', and adversarial terms on the mixed
+//! decodes). With adversarial training the two discriminators then take one
+//! step on real clips vs the (detached) reconstructions (and mixed decodes),
+//! all in one batch. With Adam the rate follows a cosine down to `cosine_to`
+//! of itself.
 
 use std::time::Instant;
 
@@ -148,6 +151,12 @@ pub struct Losses {
     /// Mean squared foot depth below the ground, m^2.
     #[serde(default)]
     pub floor: f32,
+    /// Generator hinge term on mixed-code decodes (0 when off).
+    #[serde(default)]
+    pub mixed_adversarial: f32,
+    /// Squared relative motion-energy difference of mixed-code decodes (0 when off).
+    #[serde(default)]
+    pub mixed_motion: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -174,6 +183,8 @@ pub struct Trainer {
     full_batch: Option<Prepared>,
     /// Foot kinematics of the training skeleton, when the foot terms are on.
     feet: Option<FootKinematics>,
+    /// Kinematics of every joint, when the mixed-motion term is on.
+    joints: Option<FootKinematics>,
 }
 
 /// A batch with what the loss compares it to: rotation matrices and foot positions.
@@ -193,6 +204,16 @@ impl Prepared {
             feet,
         })
     }
+}
+
+/// Codes drawn between two clips of a batch, decoded beside the reconstructions.
+struct Mixed {
+    /// `(B, latent)`, detached.
+    codes: Tensor,
+    /// `(B, T)`: as long as the mean of the two parents' lengths.
+    mask: Tensor,
+    /// Batch indices `(B,)` of the two parent clips (`u32`).
+    parents: (Tensor, Tensor),
 }
 
 impl Trainer {
@@ -216,6 +237,11 @@ impl Trainer {
         } else {
             FootKinematics::new(&data.skeleton)?
         };
+        let joints = if config.weights.mixed_motion > 0.0 {
+            Some(FootKinematics::all_joints(&data.skeleton)?)
+        } else {
+            None
+        };
         let full_batch = if data.len() <= config.batch_size {
             let all: Vec<usize> = (0..data.len()).collect();
             Some(Prepared::new(data.batch(&all)?, feet.as_ref())?)
@@ -234,6 +260,7 @@ impl Trainer {
             dis_opt,
             full_batch,
             feet,
+            joints,
         })
     }
 
@@ -264,14 +291,14 @@ impl Trainer {
     /// Codes drawn between two random clips of the batch, as sampling near
     /// samples draws them (mean of the two posteriors' means, their mean
     /// variance), detached, each with a mask as long as the mean of the two
-    /// clips' lengths: `(codes (B, latent), mask (B, T))`.
+    /// clips' lengths.
     fn mixed_codes(
         &mut self,
         mu: &Tensor,
         logvar: &Tensor,
         lengths: &[usize],
         frames: usize,
-    ) -> Result<(Tensor, Tensor)> {
+    ) -> Result<Mixed> {
         let (b, latent) = mu.dims2()?;
         let pick = |rng: &mut ChaCha8Rng| -> Vec<u32> {
             (0..b).map(|_| rng.random_range(0..b) as u32).collect()
@@ -294,7 +321,11 @@ impl Trainer {
             ((logvar.index_select(&ii, 0)?.exp()? + logvar.index_select(&jj, 0)?.exp()?)? * 0.5)?;
         let eps = nn::normal(&[b, latent], &mut self.rng)?;
         let z = (mean + (var.sqrt()? * eps)?)?;
-        Ok((z, Tensor::from_vec(mask, (b, frames), dev)?))
+        Ok(Mixed {
+            codes: z,
+            mask: Tensor::from_vec(mask, (b, frames), dev)?,
+            parents: (ii, jj),
+        })
     }
 
     pub fn lr(&self) -> f64 {
@@ -324,14 +355,18 @@ impl Trainer {
         let frames = batch.x.dim(1)?;
         // Codes between training clips, decoded in the same pass: they have no
         // captured counterpart, only the skating and floor terms judge them.
-        let mixed = if self.feet.is_some() && (wf.skating > 0.0 || wf.floor > 0.0) {
+        let mixed_adversarial = self.config.adversarial && w.mixed_adversarial > 0.0;
+        let mixed = if (self.feet.is_some() && (wf.skating > 0.0 || wf.floor > 0.0))
+            || w.mixed_motion > 0.0
+            || mixed_adversarial
+        {
             Some(self.mixed_codes(&mu, &logvar, &batch.lengths, frames)?)
         } else {
             None
         };
         let vae = &self.vae;
         let z_all = match &mixed {
-            Some((zm, _)) => Tensor::cat(&[&z, zm], 0)?,
+            Some(m) => Tensor::cat(&[&z, &m.codes], 0)?,
             None => z,
         };
         let decoded = vae.decoder.forward(&z_all, frames)?;
@@ -343,6 +378,23 @@ impl Trainer {
         let smooth = loss::smoothness(&raw_hat, &batch.mask)?;
         let kl = nn::kl_mean(&mu, &logvar)?;
         let mut total = ((&root + &rot)? + ((smooth.clone() * w.smooth)? + (kl.clone() * w.kl)?)?)?;
+        let mut mixed_motion = 0.0;
+        if let (Some(m), Some(jk)) = (&mixed, &self.joints) {
+            let fps = self.config.features.fps;
+            let raw_mixed = raw_all.narrow(0, b, b)?;
+            let speed = |raw: &Tensor, mask: &Tensor| {
+                feet::pose_speed(&jk.positions(raw)?, &raw.narrow(2, 0, 3)?, mask, fps)
+            };
+            let moving = speed(&raw_mixed, &m.mask)?;
+            let real = speed(&batch.raw, &batch.mask)?.detach();
+            let target = ((real.index_select(&m.parents.0, 0)?
+                + real.index_select(&m.parents.1, 0)?)?
+                * 0.5)?;
+            let rel = ((moving - &target)? / target.clamp(1e-3, f64::INFINITY)?)?;
+            let term = rel.sqr()?.mean_all()?;
+            mixed_motion = term.to_scalar::<f32>()?;
+            total = (total + (term * w.mixed_motion)?)?;
+        }
         let mut foot = [0.0f32; 4];
         if let (Some(fk), Some(target)) = (&self.feet, &prepared.feet) {
             let fps = self.config.features.fps;
@@ -352,10 +404,10 @@ impl Trainer {
             let velocity = feet::velocity_error(&pos, target, &batch.mask, fps)?;
             let mut floor = feet::floor(&pos, &batch.mask)?;
             let mut skating = Tensor::zeros((), floor.dtype(), floor.device())?;
-            if let Some((_, mask)) = &mixed {
+            if let Some(m) = &mixed {
                 let pm = pos_all.narrow(0, b, pos_all.dim(0)? - b)?;
-                skating = feet::skating(&pm, mask, fps, wf.contact_height_m)?;
-                floor = (floor + feet::floor(&pm, mask)?)?;
+                skating = feet::skating(&pm, &m.mask, fps, wf.contact_height_m)?;
+                floor = (floor + feet::floor(&pm, &m.mask)?)?;
             }
             foot = [
                 position.to_scalar()?,
@@ -368,11 +420,22 @@ impl Trainer {
             total = (total + terms)?;
         }
         let mut adv = 0.0;
+        let mut adv_mixed = 0.0;
         if self.config.adversarial {
             let g = (loss::hinge_generator(&vae.frame_disc.forward(&xhat)?, Some(&batch.mask))?
                 + loss::hinge_generator(&vae.seq_disc.forward(&xhat, &batch.mask)?, None)?)?;
             adv = g.to_scalar::<f32>()?;
             total = (total + (g * w.adversarial)?)?;
+        }
+        let x_mixed = match (&mixed, mixed_adversarial) {
+            (Some(m), true) => Some((decoded.narrow(0, b, b)?, &m.mask)),
+            _ => None,
+        };
+        if let Some((xm, mm)) = &x_mixed {
+            let g = (loss::hinge_generator(&vae.frame_disc.forward(xm)?, Some(mm))?
+                + loss::hinge_generator(&vae.seq_disc.forward(xm, mm)?, None)?)?;
+            adv_mixed = g.to_scalar::<f32>()?;
+            total = (total + (g * w.mixed_adversarial)?)?;
         }
         let grads = total.backward()?;
         self.gen_opt.step(&grads)?;
@@ -380,12 +443,22 @@ impl Trainer {
         if self.config.adversarial {
             // Real and fake clips in one batch: one pass of each discriminator
             // (the sequence one is a BiLSTM, whose steps run one after another).
-            let both = Tensor::cat(&[&batch.x, &xhat.detach()], 0)?;
+            // With mixed adversarial terms the mixed decodes are a third block
+            // of fakes in the same pass.
             let m = &batch.mask;
-            let m2 = Tensor::cat(&[m, m], 0)?;
-            let frame = vae.frame_disc.forward(&both)?;
-            let seq = vae.seq_disc.forward(&both, &m2)?;
-            let d = (loss::hinge_discriminator(
+            let (all, masks) = match &x_mixed {
+                Some((xm, mm)) => (
+                    Tensor::cat(&[&batch.x, &xhat.detach(), &xm.detach()], 0)?,
+                    Tensor::cat(&[m, m, *mm], 0)?,
+                ),
+                None => (
+                    Tensor::cat(&[&batch.x, &xhat.detach()], 0)?,
+                    Tensor::cat(&[m, m], 0)?,
+                ),
+            };
+            let frame = vae.frame_disc.forward(&all)?;
+            let seq = vae.seq_disc.forward(&all, &masks)?;
+            let mut d = (loss::hinge_discriminator(
                 &frame.narrow(0, 0, b)?,
                 &frame.narrow(0, b, b)?,
                 Some(m),
@@ -394,6 +467,11 @@ impl Trainer {
                 &seq.narrow(0, b, b)?,
                 None,
             )?)?;
+            if let Some((_, mm)) = &x_mixed {
+                let fake_frame = (frame.narrow(0, 2 * b, b)? + 1.0)?.relu()?;
+                let fake_seq = (seq.narrow(0, 2 * b, b)? + 1.0)?.relu()?;
+                d = (d + (loss::masked_frame_mean(&fake_frame, mm)? + fake_seq.mean_all()?)?)?;
+            }
             disc = d.to_scalar::<f32>()?;
             self.dis_opt.step(&d.backward()?)?;
         }
@@ -408,6 +486,8 @@ impl Trainer {
             foot_velocity: foot[1],
             skating: foot[2],
             floor: foot[3],
+            mixed_adversarial: adv_mixed,
+            mixed_motion,
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {

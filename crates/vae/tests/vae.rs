@@ -158,9 +158,27 @@ fn adversarial_training_runs_and_reports_its_terms() {
         seen.iter()
             .all(|l| l.discriminator > 0.0 && l.total.is_finite())
     );
+    assert!(seen.iter().all(|l| l.mixed_adversarial == 0.0));
+    // With the mixed-code terms on, the generator's term on mixed decodes is
+    // reported and training stays finite.
+    let mut cfg = tiny_config(5);
+    cfg.weights.mixed_adversarial = 0.01;
+    let mut mixed = vec![];
+    vae::train(&clips, &cfg, |p| mixed.push(*p.losses)).unwrap();
+    assert!(
+        mixed
+            .iter()
+            .all(|l| l.mixed_adversarial != 0.0 && l.total.is_finite()),
+        "{mixed:?}"
+    );
     let mut cfg = tiny_config(2);
     cfg.adversarial = false;
-    vae::train(&clips, &cfg, |p| assert_eq!(p.losses.discriminator, 0.0)).unwrap();
+    cfg.weights.mixed_adversarial = 0.01;
+    vae::train(&clips, &cfg, |p| {
+        assert_eq!(p.losses.discriminator, 0.0);
+        assert_eq!(p.losses.mixed_adversarial, 0.0);
+    })
+    .unwrap();
 }
 
 #[test]
@@ -282,4 +300,57 @@ fn a_static_root_above_the_hips_trains_and_samples_as_the_walk() {
     assert_eq!(sample.skeleton().base()[0].name, "joint_Root");
     let text = motion::bvh::to_bytes(sample);
     assert!(text.starts_with(b"HIERARCHY\nROOT joint_Root\n"));
+}
+
+/// Mean pose speed (m/s, joints relative to the root) of clips.
+fn pose_speed(clips: &[Motion]) -> f64 {
+    clips
+        .iter()
+        .map(|m| motion::metrics::plausibility(m).pose_speed_m_s)
+        .sum::<f64>()
+        / clips.len() as f64
+}
+
+#[test]
+fn the_mixed_motion_term_keeps_codes_between_out_of_phase_clips_moving() {
+    // Swings half a period apart: a decoder that averages them between their
+    // codes renders an in-between that barely moves; the term asks it to move
+    // like its parents.
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| {
+            clip(
+                24,
+                0.9,
+                if i % 2 == 0 {
+                    0.0
+                } else {
+                    std::f64::consts::PI
+                },
+            )
+        })
+        .collect();
+    let speed_of = |mixed_motion: f64| {
+        let mut cfg = tiny_config(300);
+        cfg.adversarial = false;
+        cfg.feet = vae::FootLoss::off();
+        cfg.weights.mixed_motion = mixed_motion;
+        let mut reported = vec![];
+        let model = vae::train(&clips, &cfg, |p| reported.push(p.losses.mixed_motion)).unwrap();
+        let samples: Vec<Motion> = model
+            .sample_decoded(24, Prior::Near, 3)
+            .unwrap()
+            .into_iter()
+            .map(|s| s.motion)
+            .collect();
+        (pose_speed(&samples), reported)
+    };
+    let originals = pose_speed(&clips);
+    let (off, reported_off) = speed_of(0.0);
+    let (on, reported_on) = speed_of(1.0);
+    assert!(reported_off.iter().all(|&l| l == 0.0));
+    assert!(reported_on.iter().all(|l| l.is_finite()) && reported_on[0] > 0.0);
+    assert!(
+        on > off && (originals - on).abs() < (originals - off).abs(),
+        "pose speed: originals {originals:.3}, samples without the term {off:.3}, with it {on:.3}"
+    );
 }

@@ -52,12 +52,22 @@ pub struct Args {
     /// Weight of the smoothness term (default: the training default).
     #[arg(long)]
     smooth: Option<f64>,
+    /// Weight of the foot position term (variants with foot terms).
+    #[arg(long)]
+    foot_position: Option<f64>,
     /// Weight of the foot velocity term (variants with foot terms).
     #[arg(long)]
     foot_velocity: Option<f64>,
     /// Weight of the mixed-code skating term (variants with foot terms).
     #[arg(long)]
     skating: Option<f64>,
+    /// Weight of the adversarial terms on mixed-code decodes (variants with
+    /// discriminators; default: the training default).
+    #[arg(long)]
+    mixed_adversarial: Option<f64>,
+    /// Weight of the mixed-code motion-energy term (default: the training default).
+    #[arg(long)]
+    mixed_motion: Option<f64>,
     /// Where the curves and the summary (`summary.json`) go.
     #[arg(long)]
     out: PathBuf,
@@ -134,6 +144,9 @@ struct Row {
     samples: SetPlausibility,
     /// Sample skating / original skating.
     skating_ratio: f64,
+    /// Fraction of the (planted) samples whose pose speed is at least half
+    /// the originals' mean: samples that move, not a frozen in-between pose.
+    samples_moving_fraction: f64,
     mmd2_samples_to_test: f64,
     mmd2_train_to_test: f64,
 }
@@ -152,7 +165,16 @@ fn run_one(
     if let Some(w) = args.smooth {
         config.weights.smooth = w;
     }
+    if let Some(w) = args.mixed_adversarial {
+        config.weights.mixed_adversarial = w;
+    }
+    if let Some(w) = args.mixed_motion {
+        config.weights.mixed_motion = w;
+    }
     if !config.feet.is_off() {
+        if let Some(w) = args.foot_position {
+            config.feet.position = w;
+        }
         if let Some(w) = args.foot_velocity {
             config.feet.velocity = w;
         }
@@ -168,7 +190,7 @@ fn run_one(
             let seconds = start.elapsed().as_secs_f64();
             let l = p.losses;
             eprintln!(
-                "{class} {}: it {}/{} {:.0} s  root {:.4} rot {:.4} feet {:.4} vel {:.3} skate {:.3} floor {:.5} kl {:.3} adv {:.3} disc {:.3}",
+                "{class} {}: it {}/{} {:.0} s  root {:.4} rot {:.4} feet {:.4} vel {:.3} skate {:.3} floor {:.5} kl {:.3} adv {:.3} disc {:.3} mixed adv {:.3} motion {:.3}",
                 variant.name(),
                 p.iteration,
                 p.iterations,
@@ -181,7 +203,9 @@ fn run_one(
                 l.floor,
                 l.kl,
                 l.adversarial,
-                l.discriminator
+                l.discriminator,
+                l.mixed_adversarial,
+                l.mixed_motion
             );
             curve.push(CurvePoint {
                 iteration: p.iteration,
@@ -227,6 +251,13 @@ fn run_one(
     let originals = SetPlausibility::of(&clips);
     let sampled = SetPlausibility::of(&samples);
     let skating_ratio = sampled.foot_skating_m_s / originals.foot_skating_m_s.max(1e-9);
+    let moving = samples
+        .iter()
+        .filter(|m| {
+            motion::metrics::plausibility(m).pose_speed_m_s >= 0.5 * originals.pose_speed_m_s
+        })
+        .count();
+    let samples_moving_fraction = moving as f64 / samples.len().max(1) as f64;
     Ok(Row {
         class: class.to_string(),
         variant,
@@ -244,6 +275,7 @@ fn run_one(
         samples_decoded: SetPlausibility::of(&decoded),
         samples: sampled,
         skating_ratio,
+        samples_moving_fraction,
         mmd2_samples_to_test: eval::mmd::mmd(&synth, &test).mmd2,
         mmd2_train_to_test: eval::mmd::mmd(&train, &test).mmd2,
     })
@@ -251,11 +283,11 @@ fn run_one(
 
 fn table(rows: &[Row]) -> String {
     let mut t = String::from(
-        "| class | variant | s (s/it) | s to 10 % | root RMSE m / angle rad | skating m/s orig / recon / decoded / samples (ratio) | penetration mm orig / samples | floating % orig / samples | pose speed m/s orig / samples | MMD^2 samples / train |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| class | variant | s (s/it) | s to 10 % | root RMSE m / angle rad | skating m/s orig / recon / decoded / samples (ratio) | penetration mm orig / samples | floating % orig / samples | pose speed m/s orig / samples (moving %) | MMD^2 samples / train |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         t += &format!(
-            "| {} | {} | {:.0} ({:.3}) | {:.0} | {:.3} / {:.3} | {:.3} / {:.3} / {:.3} / {:.3} ({:.1}x) | {:.1} / {:.1} | {:.0} / {:.0} | {:.2} / {:.2} | {:.3} / {:.3} |\n",
+            "| {} | {} | {:.0} ({:.3}) | {:.0} | {:.3} / {:.3} | {:.3} / {:.3} / {:.3} / {:.3} ({:.1}x) | {:.1} / {:.1} | {:.0} / {:.0} | {:.2} / {:.2} ({:.0}) | {:.3} / {:.3} |\n",
             r.class,
             r.variant.name(),
             r.seconds,
@@ -274,6 +306,7 @@ fn table(rows: &[Row]) -> String {
             r.samples.floating_fraction * 100.0,
             r.originals.pose_speed_m_s,
             r.samples.pose_speed_m_s,
+            r.samples_moving_fraction * 100.0,
             r.mmd2_samples_to_test,
             r.mmd2_train_to_test,
         );

@@ -1,5 +1,6 @@
-//! `motionaug vae train CLIPS... --out MODEL_DIR` and
-//! `motionaug vae sample MODEL_DIR --count N --out DIR`: the MotionAug motion VAE.
+//! `motionaug vae train CLIPS... --out MODEL_DIR`,
+//! `motionaug vae sample MODEL_DIR --count N --out DIR` and
+//! `motionaug vae reconstruct MODEL_DIR CLIPS... --out DIR`: the MotionAug motion VAE.
 //!
 //! Train one model per action class (all clips of one actor's class, so that they
 //! share a skeleton; samples use the first clip's skeleton). Sampling writes one
@@ -26,6 +27,26 @@ enum Command {
     Train(TrainArgs),
     /// Generate clips from a trained VAE.
     Sample(SampleArgs),
+    /// Encode clips and decode their posterior means: what the model makes of
+    /// clips it knows (e.g. to correct them beside the originals and samples).
+    Reconstruct(ReconstructArgs),
+}
+
+#[derive(clap::Args)]
+struct ReconstructArgs {
+    /// Model directory written by `vae train`.
+    model: PathBuf,
+    /// Clips to reconstruct (BVH, AMC with --skeleton, or NPZ).
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    #[command(flatten)]
+    clip: ClipArgs,
+    /// Output directory (created if missing): `<clip>_recon.bvh` / `.npz`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Re-integrate each root path from its planted feet, as `vae sample` does.
+    #[arg(long)]
+    plant_root: bool,
 }
 
 #[derive(clap::Args)]
@@ -64,6 +85,14 @@ struct TrainArgs {
     /// Weight of the generator's adversarial (hinge) terms.
     #[arg(long)]
     adversarial_weight: Option<f64>,
+    /// Weight of the adversarial terms on clips decoded from codes mixed
+    /// between two training clips (what near sampling decodes).
+    #[arg(long)]
+    mixed_adversarial_weight: Option<f64>,
+    /// Weight of the term asking mixed-code decodes to move as much as the two
+    /// clips they were drawn between (motion energy).
+    #[arg(long)]
+    mixed_motion_weight: Option<f64>,
     /// Print losses every N iterations (0: only the summary).
     #[arg(long, default_value_t = 100)]
     log_every: u64,
@@ -93,7 +122,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::Train(a) => train(a),
         Command::Sample(a) => sample(a),
+        Command::Reconstruct(a) => reconstruct(a),
     }
+}
+
+fn reconstruct(args: ReconstructArgs) -> anyhow::Result<()> {
+    let model = TrainedVae::load(&args.model)
+        .with_context(|| format!("cannot load the model in {}", args.model.display()))?;
+    let clips = args
+        .inputs
+        .iter()
+        .map(|p| args.clip.load(p))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let recon = model.reconstruct(&clips)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let th = motion::metrics::Thresholds::default();
+    for (path, m) in args.inputs.iter().zip(recon) {
+        let m = if args.plant_root {
+            motion::metrics::plant_root(&m, &th)
+        } else {
+            m
+        };
+        let name = format!("{}_recon", clip_name(path));
+        write_atomic(
+            &args.out.join(format!("{name}.bvh")),
+            &motion::bvh::to_bytes(&m),
+        )?;
+        let bytes = motion::npz::motion_to_bytes(&m, &[])
+            .with_context(|| format!("cannot encode {name}.npz"))?;
+        write_atomic(&args.out.join(format!("{name}.npz")), &bytes)?;
+    }
+    eprintln!(
+        "wrote {} reconstructions to {}",
+        args.inputs.len(),
+        args.out.display()
+    );
+    Ok(())
 }
 
 fn train(args: TrainArgs) -> anyhow::Result<()> {
@@ -121,6 +186,12 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(w) = args.adversarial_weight {
         config.weights.adversarial = w;
     }
+    if let Some(w) = args.mixed_adversarial_weight {
+        config.weights.mixed_adversarial = w;
+    }
+    if let Some(w) = args.mixed_motion_weight {
+        config.weights.mixed_motion = w;
+    }
     if let Some(n) = args.iterations {
         config.iterations = n;
     }
@@ -144,9 +215,10 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
             let l = p.losses;
             eprintln!(
-                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5}",
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3}",
                 p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
-                l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor
+                l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor,
+                l.mixed_adversarial, l.mixed_motion
             );
         }
     })
