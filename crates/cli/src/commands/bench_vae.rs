@@ -52,6 +52,13 @@ pub struct Args {
     /// Weight of the smoothness term (default: the training default).
     #[arg(long)]
     smooth: Option<f64>,
+    /// Weight of the KL term (default: the training default).
+    #[arg(long)]
+    kl: Option<f64>,
+    /// The paper's network sizes (`VaeConfig::reference`) with this bench's
+    /// optimiser and iterations.
+    #[arg(long)]
+    reference_sizes: bool,
     /// Weight of the foot position term (variants with foot terms).
     #[arg(long)]
     foot_position: Option<f64>,
@@ -164,6 +171,12 @@ fn run_one(
     }
     if let Some(w) = args.smooth {
         config.weights.smooth = w;
+    }
+    if let Some(w) = args.kl {
+        config.weights.kl = w;
+    }
+    if args.reference_sizes {
+        config.model = vae::VaeConfig::reference();
     }
     if let Some(w) = args.mixed_adversarial {
         config.weights.mixed_adversarial = w;
