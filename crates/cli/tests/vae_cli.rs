@@ -60,7 +60,7 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         recon.to_str().unwrap(),
     ]));
     let input = motion::io::load(
-        &example("HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"),
+        example("HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"),
         &motion::io::LoadOptions {
             skeleton: Some(example("HDM_bd.asf")),
             ..Default::default()
@@ -68,7 +68,7 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     )
     .unwrap();
     let name = "HDM_bd_jogLeftCircle4StepsRstart_001_120_recon";
-    let m = motion::io::load(&recon.join(format!("{name}.npz")), &Default::default()).unwrap();
+    let m = motion::io::load(recon.join(format!("{name}.npz")), &Default::default()).unwrap();
     assert!(recon.join(format!("{name}.bvh")).is_file());
     assert_eq!(m.fps(), 30.0);
     let seconds = |m: &motion::Motion| (m.frames() - 1) as f64 / m.fps();
