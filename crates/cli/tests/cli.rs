@@ -89,6 +89,37 @@ fn convert_resamples_and_writes_bvh_and_npz() {
     let arrays = motion::npz::read(&std::fs::read(&npz).unwrap()).unwrap();
     let positions = arrays.iter().find(|a| a.name == "positions").unwrap();
     assert_eq!(positions.shape, vec![converted.frames(), 31, 3]);
+    // Smoothing: same frames, less jerk; a negative width is refused.
+    let smooth = dir.path().join("kick30_smooth.npz");
+    ok(motionaug(&[
+        "convert",
+        KICK,
+        smooth.to_str().unwrap(),
+        "--skeleton",
+        ASF,
+        "--fps",
+        "30",
+        "--smooth-s",
+        "0.05",
+    ]));
+    let smoothed = load(&smooth, &LoadOptions::default()).unwrap();
+    assert_eq!(smoothed.frames(), converted.frames());
+    let jerk = |m: &motion::Motion| motion::metrics::plausibility(m).jerk_m_s3;
+    assert!(
+        jerk(&smoothed) < 0.8 * jerk(&converted),
+        "{} vs {}",
+        jerk(&smoothed),
+        jerk(&converted)
+    );
+    let err = failed(motionaug(&[
+        "convert",
+        KICK,
+        smooth.to_str().unwrap(),
+        "--skeleton",
+        ASF,
+        "--smooth-s=-1",
+    ]));
+    assert!(err.contains("sigma"), "{err}");
 }
 
 #[test]

@@ -26,6 +26,7 @@ pub mod npz;
 pub mod resample;
 pub mod rotation;
 pub mod skeleton;
+pub mod smooth;
 mod text;
 pub mod units;
 

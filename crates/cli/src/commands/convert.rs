@@ -1,4 +1,4 @@
-//! `motionaug convert IN OUT.bvh|OUT.npz [--fps N]`.
+//! `motionaug convert IN OUT.bvh|OUT.npz [--fps N] [--smooth-s S]`.
 
 use std::path::PathBuf;
 
@@ -17,6 +17,10 @@ pub struct Args {
     /// Resample to this frame rate (slerp), e.g. 30.
     #[arg(long)]
     fps: Option<f64>,
+    /// Low-pass the root path and rotations with a Gaussian of this standard
+    /// deviation, seconds (after resampling), e.g. 0.05.
+    #[arg(long)]
+    smooth_s: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -24,6 +28,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(fps) = args.fps {
         motion = motion::resample::resample(&motion, fps)
             .with_context(|| format!("cannot resample {} to {fps} fps", args.input.display()))?;
+    }
+    if let Some(sigma) = args.smooth_s {
+        motion = motion::smooth::gaussian(&motion, sigma)?;
     }
     motion::io::save(&motion, &args.output)?;
     eprintln!(

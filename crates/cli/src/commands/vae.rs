@@ -47,6 +47,10 @@ struct ReconstructArgs {
     /// Re-integrate each root path from its planted feet, as `vae sample` does.
     #[arg(long)]
     plant_root: bool,
+    /// Low-pass each reconstruction first (`motion::smooth::gaussian`, this
+    /// standard deviation in seconds), before any root planting.
+    #[arg(long)]
+    smooth_s: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -139,6 +143,10 @@ fn reconstruct(args: ReconstructArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let th = motion::metrics::Thresholds::default();
     for (path, m) in args.inputs.iter().zip(recon) {
+        let m = match args.smooth_s {
+            Some(sigma) => motion::smooth::gaussian(&m, sigma)?,
+            None => m,
+        };
         let m = if args.plant_root {
             motion::metrics::plant_root(&m, &th)
         } else {
