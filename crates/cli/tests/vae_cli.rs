@@ -40,6 +40,36 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         assert_eq!(m.frames() as u64, e["frames"].as_u64().unwrap());
         assert!(out.join(e["npz"].as_str().unwrap()).is_file());
     }
+    // Smoothed samples: the same clips' lengths, less jerk than as decoded.
+    let smooth = dir.path().join("smooth");
+    ok(motionaug(&[
+        "vae",
+        "sample",
+        model_s,
+        "--count",
+        "3",
+        "--out",
+        smooth.to_str().unwrap(),
+        "--prior",
+        "near",
+        "--seed",
+        "4",
+        "--smooth-s",
+        "0.1",
+    ]));
+    let jerk = |dir: &std::path::Path, e: &serde_json::Value| {
+        let m =
+            motion::io::load(dir.join(e["npz"].as_str().unwrap()), &Default::default()).unwrap();
+        (m.frames(), motion::metrics::plausibility(&m).jerk_m_s3)
+    };
+    let (mut raw, mut smoothed) = (0.0, 0.0);
+    for e in entries {
+        let (a, b) = (jerk(&out, e), jerk(&smooth, e));
+        assert_eq!(a.0, b.0);
+        raw += a.1;
+        smoothed += b.1;
+    }
+    assert!(smoothed < raw, "jerk {smoothed} vs {raw}");
     let bad = motionaug(&["vae", "sample", out_s, "--count", "1", "--out", out_s]);
     assert!(
         !bad.status.success(),

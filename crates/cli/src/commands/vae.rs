@@ -120,6 +120,10 @@ struct SampleArgs {
     members: Option<usize>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Low-pass each decoded sample (`motion::smooth::gaussian`, this standard
+    /// deviation in seconds) before its root is planted: decoded clips jitter.
+    #[arg(long)]
+    smooth_s: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -267,7 +271,18 @@ fn sample(args: SampleArgs) -> anyhow::Result<()> {
     if let Some(members) = args.members {
         model = model.with_near_members(members)?;
     }
-    let samples = model.sample(args.count, args.prior, args.seed)?;
+    let samples = match args.smooth_s {
+        None => model.sample(args.count, args.prior, args.seed)?,
+        Some(sigma) => {
+            let th = motion::metrics::Thresholds::default();
+            let mut samples = model.sample_decoded(args.count, args.prior, args.seed)?;
+            for s in &mut samples {
+                s.motion =
+                    motion::metrics::plant_root(&motion::smooth::gaussian(&s.motion, sigma)?, &th);
+            }
+            samples
+        }
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let model_name = clip_name(&args.model);
