@@ -378,9 +378,10 @@ impl Skeleton {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
+    /// Three joints in a line (root, a, b), unit offsets along y.
     pub(crate) fn chain() -> Skeleton {
         let joint = |name: &str, parent, offset| Joint {
             name: name.into(),

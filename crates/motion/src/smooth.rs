@@ -70,30 +70,21 @@ pub fn gaussian(motion: &Motion, sigma_s: f64) -> Result<Motion, MotionError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Joint, Skeleton};
+    use crate::skeleton::tests::chain;
     use std::sync::Arc;
 
+    /// The test chain with joint 1 turning by `rot(t)` and the root at `root(t)`.
     fn clip(rot: impl Fn(usize) -> DQuat, root: impl Fn(usize) -> DVec3, n: usize) -> Motion {
-        let joint = |name: &str, parent, offset| Joint {
-            name: name.into(),
-            parent,
-            offset,
-            channels: vec![],
-            end_site: None,
-            limits: None,
-        };
-        let s = Arc::new(
-            Skeleton::new(
-                vec![
-                    joint("hips", None, DVec3::ZERO),
-                    joint("knee", Some(0), DVec3::new(0.0, -0.4, 0.0)),
-                ],
-                1.0,
-            )
-            .unwrap(),
-        );
-        let rotations = (0..n).flat_map(|t| [DQuat::IDENTITY, rot(t)]).collect();
-        Motion::new(s, 30.0, (0..n).map(root).collect(), rotations).unwrap()
+        let rotations = (0..n)
+            .flat_map(|t| [DQuat::IDENTITY, rot(t), DQuat::IDENTITY])
+            .collect();
+        Motion::new(
+            Arc::new(chain()),
+            30.0,
+            (0..n).map(root).collect(),
+            rotations,
+        )
+        .unwrap()
     }
 
     #[test]

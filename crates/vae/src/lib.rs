@@ -11,8 +11,8 @@
 //!   the `nn` crate's seeded parameters, Linear, MLP and LayerNorm.
 //! * [`loss`], [`train`]: losses and the training loop (the `nn` crate's
 //!   SGD/Adam optimiser and KL term).
-//! * [`feet`]: forward kinematics of the foot points on tensors, and the foot
-//!   terms (foot position and velocity against the capture; skating and floor
+//! * [`feet`]: forward kinematics of the foot points (or of every joint, for
+//!   the pose speed of mixed decodes) on tensors, and the foot terms (foot position and velocity against the capture; skating and floor
 //!   penetration of clips decoded from codes mixed between training clips).
 //! * [`latent`]: PCA + k-means clustering of training posteriors, near sampling.
 //! * [`trained`]: a trained model: encode, decode, sample, save, load.

@@ -33,10 +33,9 @@ pub struct LossWeights {
     pub mixed_adversarial: f64,
     /// On the squared relative difference between a mixed-code decode's pose
     /// speed (`feet::pose_speed`, every joint) and the mean of its two parent
-    /// clips'. A
-    /// decoder left alone renders most in-between codes as a nearly still pose
-    /// (crates/vae/README.md, session 16); this asks them to move as much as
-    /// the clips they were drawn between. 0: off.
+    /// clips'. A decoder left alone renders most in-between codes as a nearly
+    /// still pose (crates/vae/README.md, session 16); this asks them to move as
+    /// fast as the clips they were drawn between. 0: off.
     #[serde(default)]
     pub mixed_motion: f64,
 }

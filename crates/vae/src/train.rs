@@ -154,7 +154,7 @@ pub struct Losses {
     /// Generator hinge term on mixed-code decodes (0 when off).
     #[serde(default)]
     pub mixed_adversarial: f32,
-    /// Squared relative motion-energy difference of mixed-code decodes (0 when off).
+    /// Squared relative pose-speed difference of mixed-code decodes (0 when off).
     #[serde(default)]
     pub mixed_motion: f32,
     /// Weighted total the generator minimised.
@@ -192,18 +192,35 @@ struct Prepared {
     batch: Batch,
     rotations: Tensor,
     feet: Option<Tensor>,
+    /// Pose speed of each clip `(B,)` (when the mixed-motion term is on):
+    /// what its mixed decodes are asked to match.
+    pose_speed: Option<Tensor>,
 }
 
 impl Prepared {
-    fn new(batch: Batch, feet: Option<&FootKinematics>) -> Result<Self> {
+    fn new(
+        batch: Batch,
+        feet: Option<&FootKinematics>,
+        joints: Option<&FootKinematics>,
+        fps: f64,
+    ) -> Result<Self> {
         let rotations = loss::rotation_matrices(&batch.raw)?;
         let feet = feet.map(|fk| fk.positions(&batch.raw)).transpose()?;
+        let pose_speed = joints
+            .map(|jk| pose_speed(jk, &batch.raw, &batch.mask, fps))
+            .transpose()?;
         Ok(Prepared {
             batch,
             rotations,
             feet,
+            pose_speed,
         })
     }
+}
+
+/// Pose speed `(B,)` of raw frames `(B, T, 3 + 6 J)` through the kinematics of every joint.
+fn pose_speed(joints: &FootKinematics, raw: &Tensor, mask: &Tensor, fps: f64) -> Result<Tensor> {
+    feet::pose_speed(&joints.positions(raw)?, &raw.narrow(2, 0, 3)?, mask, fps)
 }
 
 /// Codes drawn between two clips of a batch, decoded beside the reconstructions.
@@ -244,7 +261,12 @@ impl Trainer {
         };
         let full_batch = if data.len() <= config.batch_size {
             let all: Vec<usize> = (0..data.len()).collect();
-            Some(Prepared::new(data.batch(&all)?, feet.as_ref())?)
+            Some(Prepared::new(
+                data.batch(&all)?,
+                feet.as_ref(),
+                joints.as_ref(),
+                config.features.fps,
+            )?)
         } else {
             None
         };
@@ -276,6 +298,7 @@ impl Trainer {
                 },
                 rotations: p.rotations.clone(),
                 feet: p.feet.clone(),
+                pose_speed: p.pose_speed.clone(),
             });
         }
         let bs = self.config.batch_size;
@@ -285,7 +308,12 @@ impl Trainer {
         }
         let idx = self.order[self.cursor..self.cursor + bs].to_vec();
         self.cursor += bs;
-        Prepared::new(self.data.batch(&idx)?, self.feet.as_ref())
+        Prepared::new(
+            self.data.batch(&idx)?,
+            self.feet.as_ref(),
+            self.joints.as_ref(),
+            self.config.features.fps,
+        )
     }
 
     /// Codes drawn between two random clips of the batch, as sampling near
@@ -379,14 +407,9 @@ impl Trainer {
         let kl = nn::kl_mean(&mu, &logvar)?;
         let mut total = ((&root + &rot)? + ((smooth.clone() * w.smooth)? + (kl.clone() * w.kl)?)?)?;
         let mut mixed_motion = 0.0;
-        if let (Some(m), Some(jk)) = (&mixed, &self.joints) {
-            let fps = self.config.features.fps;
+        if let (Some(m), Some(jk), Some(real)) = (&mixed, &self.joints, &prepared.pose_speed) {
             let raw_mixed = raw_all.narrow(0, b, b)?;
-            let speed = |raw: &Tensor, mask: &Tensor| {
-                feet::pose_speed(&jk.positions(raw)?, &raw.narrow(2, 0, 3)?, mask, fps)
-            };
-            let moving = speed(&raw_mixed, &m.mask)?;
-            let real = speed(&batch.raw, &batch.mask)?.detach();
+            let moving = pose_speed(jk, &raw_mixed, &m.mask, self.config.features.fps)?;
             let target = ((real.index_select(&m.parents.0, 0)?
                 + real.index_select(&m.parents.1, 0)?)?
                 * 0.5)?;

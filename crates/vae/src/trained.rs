@@ -237,9 +237,25 @@ impl TrainedVae {
     /// (`motion::metrics::plant_root`), so that the root goes where the legs
     /// step. The same seed gives the same clips.
     pub fn sample(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
+        self.sample_smoothed(count, prior, seed, None)
+    }
+
+    /// [`TrainedVae::sample`], each decoded clip first low-passed with a
+    /// Gaussian of `smooth_s` seconds (`motion::smooth::gaussian`; decoded
+    /// clips jitter, crates/vae/README.md, session 18), then planted.
+    pub fn sample_smoothed(
+        &self,
+        count: usize,
+        prior: Prior,
+        seed: u64,
+        smooth_s: Option<f64>,
+    ) -> Result<Vec<Sample>> {
         let th = motion::metrics::Thresholds::default();
         let mut samples = self.sample_decoded(count, prior, seed)?;
         for s in &mut samples {
+            if let Some(sigma) = smooth_s {
+                s.motion = motion::smooth::gaussian(&s.motion, sigma)?;
+            }
             s.motion = motion::metrics::plant_root(&s.motion, &th);
         }
         Ok(samples)

@@ -72,7 +72,7 @@ pub struct Args {
     /// discriminators; default: the training default).
     #[arg(long)]
     mixed_adversarial: Option<f64>,
-    /// Weight of the mixed-code motion-energy term (default: the training default).
+    /// Weight of the mixed-code pose-speed term (default: the training default).
     #[arg(long)]
     mixed_motion: Option<f64>,
     /// Where the curves and the summary (`summary.json`) go.

@@ -93,8 +93,8 @@ struct TrainArgs {
     /// between two training clips (what near sampling decodes).
     #[arg(long)]
     mixed_adversarial_weight: Option<f64>,
-    /// Weight of the term asking mixed-code decodes to move as much as the two
-    /// clips they were drawn between (motion energy).
+    /// Weight of the term asking mixed-code decodes to move as fast as the two
+    /// clips they were drawn between (pose speed).
     #[arg(long)]
     mixed_motion_weight: Option<f64>,
     /// Print losses every N iterations (0: only the summary).
@@ -271,18 +271,7 @@ fn sample(args: SampleArgs) -> anyhow::Result<()> {
     if let Some(members) = args.members {
         model = model.with_near_members(members)?;
     }
-    let samples = match args.smooth_s {
-        None => model.sample(args.count, args.prior, args.seed)?,
-        Some(sigma) => {
-            let th = motion::metrics::Thresholds::default();
-            let mut samples = model.sample_decoded(args.count, args.prior, args.seed)?;
-            for s in &mut samples {
-                s.motion =
-                    motion::metrics::plant_root(&motion::smooth::gaussian(&s.motion, sigma)?, &th);
-            }
-            samples
-        }
-    };
+    let samples = model.sample_smoothed(args.count, args.prior, args.seed, args.smooth_s)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let model_name = clip_name(&args.model);
