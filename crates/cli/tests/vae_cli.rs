@@ -28,7 +28,19 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     assert!(model.join("weights.safetensors").is_file());
     assert!(model.join("model.json").is_file());
     ok(motionaug(&[
-        "vae", "sample", model_s, "--count", "3", "--out", out_s, "--prior", "near", "--seed", "4",
+        "vae",
+        "sample",
+        model_s,
+        "--count",
+        "3",
+        "--out",
+        out_s,
+        "--prior",
+        "near",
+        "--seed",
+        "4",
+        "--smooth-s",
+        "0",
     ]));
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
@@ -40,7 +52,8 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         assert_eq!(m.frames() as u64, e["frames"].as_u64().unwrap());
         assert!(out.join(e["npz"].as_str().unwrap()).is_file());
     }
-    // Smoothed samples: the same clips' lengths, less jerk than as decoded.
+    // Smoothed samples (the default, here wider): the same clips' lengths,
+    // less jerk than as decoded.
     let smooth = dir.path().join("smooth");
     ok(motionaug(&[
         "vae",
@@ -85,7 +98,6 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
         "examples/data/HDM_bd_jogLeftCircle4StepsRstart_001_120.amc",
         "--skeleton",
         "examples/data/HDM_bd.asf",
-        "--plant-root",
         "--out",
         recon.to_str().unwrap(),
     ]));
@@ -104,6 +116,16 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     let seconds = |m: &motion::Motion| (m.frames() - 1) as f64 / m.fps();
     assert!((seconds(&m) - seconds(&input)).abs() < 0.1);
     failed(motionaug(&["vae", "reconstruct", model_s, "--out", out_s]));
+    failed(motionaug(&[
+        "vae",
+        "sample",
+        model_s,
+        "--count",
+        "1",
+        "--out",
+        out_s,
+        "--smooth-s=-0.1",
+    ]));
 }
 
 #[test]

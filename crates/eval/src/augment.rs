@@ -69,7 +69,8 @@ impl Augmentation {
             } => apply_recipe(recipe, *seed, work.as_deref(), train, log),
             Augmentation::Vae(v) => {
                 let model = train_vae(train, v.iterations, v.adversarial_weight, v.seed, log)?;
-                sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed)
+                let finish = vae::Finish::default();
+                sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed, &finish)
             }
         }
     }
@@ -208,14 +209,16 @@ pub fn cached_vae(
     Ok(model)
 }
 
-/// `count` samples of `model` from `prior`, named `vae_<Prior>_<nnnn>`.
+/// `count` samples of `model` from `prior`, each finished by `finish`, named
+/// `vae_<Prior>_<nnnn>`.
 pub fn sample_vae(
     model: &TrainedVae,
     count: usize,
     prior: Prior,
     seed: u64,
+    finish: &vae::Finish,
 ) -> Result<Vec<(String, Motion)>> {
-    let samples = model.sample(count, prior, seed)?;
+    let samples = model.sample_finished(count, prior, seed, finish)?;
     Ok(samples
         .into_iter()
         .enumerate()

@@ -30,7 +30,8 @@ pub fn gaussian(motion: &Motion, sigma_s: f64) -> Result<Motion, MotionError> {
     if sigma < 1e-3 || n < 2 {
         return Ok(out);
     }
-    let half = (3.0 * sigma).ceil() as isize;
+    // Past the clip's length a wider window only adds weights of absent frames.
+    let half = (3.0 * sigma).ceil().min(n as f64) as isize;
     let weights: Vec<f64> = (-half..=half)
         .map(|k| (-(k as f64).powi(2) / (2.0 * sigma * sigma)).exp())
         .collect();

@@ -16,6 +16,8 @@
 //! prior = "near"            # near | normal
 //! near_members = 2          # near codes between this many clips of a cluster
 //! mixed_motion_weight = 0.0 # > 0: codes between clips decode to motion as fast as theirs
+//! smooth_s = 0.05           # low-pass each sample (seconds; 0 = as decoded): decoded clips jitter
+//! plant_root = true         # re-integrate each sample's root from its planted feet
 //!
 //! [interaction]             # every pair <stem>_A / <stem>_B: `copies` body-size variations of B
 //! copies = 4
@@ -79,6 +81,22 @@ pub struct VaeStep {
     /// Samples then move like the class instead of standing nearly still, but
     /// on jog fewer pass physical correction (crates/vae/README.md, session 18).
     pub mixed_motion_weight: f64,
+    /// Low-pass each sample with a Gaussian of this many seconds (0: as
+    /// decoded; `vae::Finish`): decoded clips jitter, and smoothed jog samples
+    /// pass physical correction 10/30 where raw ones pass 4/30.
+    pub smooth_s: f64,
+    /// Re-integrate each sample's root path from its planted feet.
+    pub plant_root: bool,
+}
+
+impl VaeStep {
+    /// What is done to each decoded sample.
+    pub fn finish(&self) -> vae::Finish {
+        vae::Finish {
+            smooth_s: (self.smooth_s > 0.0).then_some(self.smooth_s),
+            plant_root: self.plant_root,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -99,6 +117,8 @@ impl Default for VaeStep {
             min_clips: 2,
             near_members: vae::NearConfig::default().members,
             mixed_motion_weight: 0.0,
+            smooth_s: vae::trained::DEFAULT_SMOOTH_S,
+            plant_root: true,
         }
     }
 }
@@ -387,6 +407,7 @@ pub mod bounds {
     pub const VAE_ITERATIONS: Bound = bound("vae", "iterations", 100_000.0, "training steps");
     pub const VAE_MIN_CLIPS: Bound = bound("vae", "min_clips", 10_000.0, "clips");
     pub const VAE_NEAR_MEMBERS: Bound = bound("vae", "near_members", 10_000.0, "clips");
+    pub const VAE_SMOOTH_S: Bound = bound("vae", "smooth_s", 1.0, "seconds");
     pub const CORRECT_TIME_BUDGET_S: Bound = bound(
         "correct",
         "time_budget_s",
@@ -447,6 +468,7 @@ pub mod bounds {
         VAE_ITERATIONS,
         VAE_MIN_CLIPS,
         VAE_NEAR_MEMBERS,
+        VAE_SMOOTH_S,
         CORRECT_TIME_BUDGET_S,
         CORRECT_ENVS,
         CORRECT_TRACKER_BUDGET_S,
@@ -604,6 +626,10 @@ impl Recipe {
                     "`mixed_motion_weight` must be a finite number >= 0",
                 ));
             }
+            if !(v.smooth_s.is_finite() && v.smooth_s >= 0.0) {
+                return Err(err("[vae]", "`smooth_s` must be a finite number >= 0"));
+            }
+            bounds::VAE_SMOOTH_S.check(v.smooth_s)?;
             if v.min_clips == 0 {
                 return Err(err("[vae]", "`min_clips` must be at least 1"));
             }

@@ -77,7 +77,7 @@ pub fn vae(
     config.weights.mixed_motion = step.mixed_motion_weight;
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
     let model = vae::train(&motions, &config, |_| {})?;
-    let samples = model.sample(step.copies as usize, step.prior, seed)?;
+    let samples = model.sample_finished(step.copies as usize, step.prior, seed, &step.finish())?;
     let names = crate::plan::vae_outputs(group, step.copies);
     let sources: Vec<Value> = clips.iter().map(|(n, _)| json!(n)).collect();
     let params = serde_json::to_value(step).unwrap_or(Value::Null);

@@ -105,6 +105,10 @@ fn recipes_are_validated_with_the_table_and_field_named() {
         e.contains("[vae]") && e.contains("mixed_motion_weight"),
         "{e}"
     );
+    for bad in ["-0.01", "5.0"] {
+        let e = recipe_err(&format!("[vae]\nsmooth_s = {bad}\n"));
+        assert!(e.contains("[vae]") && e.contains("smooth_s"), "{e}");
+    }
 }
 
 #[test]
@@ -670,6 +674,7 @@ fn numeric_recipe_fields_have_upper_bounds() {
         ("[vae]", "iterations", "[vae]\niterations = 1000000000000\n"),
         ("[vae]", "min_clips", "[vae]\nmin_clips = 1000000\n"),
         ("[vae]", "near_members", "[vae]\nnear_members = 1000000\n"),
+        ("[vae]", "smooth_s", "[vae]\nsmooth_s = 2.0\n"),
         (
             "[debias]",
             "iterations",
@@ -727,12 +732,12 @@ fn numeric_recipe_fields_have_upper_bounds() {
     assert!(e.contains("ops[0]") && e.contains("tolerance_m"), "{e}");
     // The bounds themselves are accepted.
     let at_bounds = format!(
-        "{base}[vae]\niterations = 100000\nnear_members = 10000\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
+        "{base}[vae]\niterations = 100000\nnear_members = 10000\nsmooth_s = 1.0\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
          policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\ntracker_iterations = 1000000\n\
          variant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 20);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 21);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.

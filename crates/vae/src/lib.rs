@@ -37,4 +37,4 @@ pub use latent::{NearConfig, Prior};
 pub use model::VaeConfig;
 pub use nn::OptimizerConfig;
 pub use train::{Losses, Progress, TrainConfig, Trainer, train};
-pub use trained::{ReconstructionError, Sample, TrainedVae};
+pub use trained::{Finish, ReconstructionError, Sample, TrainedVae};

@@ -89,6 +89,47 @@ pub struct TrainedVae {
     skeleton: Arc<Skeleton>,
 }
 
+/// What is done to a decoded clip before it is handed out.
+///
+/// Decoded clips jitter frame to frame (3-4x the jerk of captures) and their
+/// root does not follow their feet; both make physical correction fail
+/// (crates/vae/README.md, sessions 18-19).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Finish {
+    /// Low-pass with a Gaussian of this standard deviation in seconds
+    /// (`motion::smooth::gaussian`); `None`: as decoded.
+    pub smooth_s: Option<f64>,
+    /// Re-integrate the root path from the planted feet
+    /// (`motion::metrics::plant_root`), after smoothing.
+    pub plant_root: bool,
+}
+
+impl Default for Finish {
+    fn default() -> Self {
+        Finish {
+            smooth_s: Some(DEFAULT_SMOOTH_S),
+            plant_root: true,
+        }
+    }
+}
+
+/// The low-pass [`Finish::default`] applies, seconds.
+pub const DEFAULT_SMOOTH_S: f64 = 0.05;
+
+impl Finish {
+    /// `motion` finished.
+    pub fn apply(&self, motion: &Motion) -> Result<Motion> {
+        let mut m = match self.smooth_s {
+            Some(sigma) => motion::smooth::gaussian(motion, sigma)?,
+            None => motion.clone(),
+        };
+        if self.plant_root {
+            m = motion::metrics::plant_root(&m, &motion::metrics::Thresholds::default());
+        }
+        Ok(m)
+    }
+}
+
 impl TrainedVae {
     pub fn from_parts(vae: Vae, meta: ModelMeta) -> Result<Self> {
         let dim = frame_dim(meta.skeleton.len());
@@ -233,30 +274,24 @@ impl TrainedVae {
     }
 
     /// `count` clips; codes from `prior` (see [`TrainedVae::sample_decoded`]),
-    /// each with its root path re-integrated from its planted feet
-    /// (`motion::metrics::plant_root`), so that the root goes where the legs
-    /// step. The same seed gives the same clips.
+    /// each finished as [`Finish::default`] says (low-passed, root re-integrated
+    /// from its planted feet so that the root goes where the legs step). The
+    /// same seed gives the same clips.
     pub fn sample(&self, count: usize, prior: Prior, seed: u64) -> Result<Vec<Sample>> {
-        self.sample_smoothed(count, prior, seed, None)
+        self.sample_finished(count, prior, seed, &Finish::default())
     }
 
-    /// [`TrainedVae::sample`], each decoded clip first low-passed with a
-    /// Gaussian of `smooth_s` seconds (`motion::smooth::gaussian`; decoded
-    /// clips jitter, crates/vae/README.md, session 18), then planted.
-    pub fn sample_smoothed(
+    /// [`TrainedVae::sample_decoded`], each clip then finished by `finish`.
+    pub fn sample_finished(
         &self,
         count: usize,
         prior: Prior,
         seed: u64,
-        smooth_s: Option<f64>,
+        finish: &Finish,
     ) -> Result<Vec<Sample>> {
-        let th = motion::metrics::Thresholds::default();
         let mut samples = self.sample_decoded(count, prior, seed)?;
         for s in &mut samples {
-            if let Some(sigma) = smooth_s {
-                s.motion = motion::smooth::gaussian(&s.motion, sigma)?;
-            }
-            s.motion = motion::metrics::plant_root(&s.motion, &th);
+            s.motion = finish.apply(&s.motion)?;
         }
         Ok(samples)
     }

@@ -533,6 +533,10 @@ struct TableArgs {
     /// clips).
     #[arg(long)]
     vae_near_members: Option<usize>,
+    /// Low-pass each VAE sample (Gaussian, seconds; 0 = as decoded) before
+    /// its root is planted: decoded clips jitter (crates/vae/README.md).
+    #[arg(long, default_value_t = TableConfig::default().vae_smooth_s)]
+    vae_smooth_s: f64,
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
@@ -565,6 +569,7 @@ impl TableArgs {
             vae_iterations: self.vae_iterations,
             vae_ablation: self.vae_ablation,
             vae_near_members: self.vae_near_members,
+            vae_smooth_s: self.vae_smooth_s,
             predict: !self.no_predict,
             sets: self.sets.clone(),
             physics: PhysicsConfig {

@@ -44,13 +44,35 @@ struct ReconstructArgs {
     /// Output directory (created if missing): `<clip>_recon.bvh` / `.npz`.
     #[arg(long)]
     out: PathBuf,
-    /// Re-integrate each root path from its planted feet, as `vae sample` does.
+    #[command(flatten)]
+    finish: FinishArgs,
+}
+
+/// What is done to each decoded clip (`vae::Finish`); the defaults are what
+/// the pipeline does.
+#[derive(clap::Args)]
+struct FinishArgs {
+    /// Low-pass each decoded clip (`motion::smooth::gaussian`, this standard
+    /// deviation in seconds; 0 = as decoded) before its root is planted:
+    /// decoded clips jitter.
+    #[arg(long, default_value_t = vae::trained::DEFAULT_SMOOTH_S)]
+    smooth_s: f64,
+    /// Keep each root path as decoded instead of re-integrating it from the
+    /// planted feet.
     #[arg(long)]
-    plant_root: bool,
-    /// Low-pass each reconstruction first (`motion::smooth::gaussian`, this
-    /// standard deviation in seconds), before any root planting.
-    #[arg(long)]
-    smooth_s: Option<f64>,
+    no_plant: bool,
+}
+
+impl FinishArgs {
+    fn finish(&self) -> anyhow::Result<vae::Finish> {
+        if !(self.smooth_s.is_finite() && self.smooth_s >= 0.0) {
+            bail!("--smooth-s must be a finite number of seconds >= 0");
+        }
+        Ok(vae::Finish {
+            smooth_s: (self.smooth_s > 0.0).then_some(self.smooth_s),
+            plant_root: !self.no_plant,
+        })
+    }
 }
 
 #[derive(clap::Args)]
@@ -120,10 +142,8 @@ struct SampleArgs {
     members: Option<usize>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Low-pass each decoded sample (`motion::smooth::gaussian`, this standard
-    /// deviation in seconds) before its root is planted: decoded clips jitter.
-    #[arg(long)]
-    smooth_s: Option<f64>,
+    #[command(flatten)]
+    finish: FinishArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -142,20 +162,12 @@ fn reconstruct(args: ReconstructArgs) -> anyhow::Result<()> {
         .iter()
         .map(|p| args.clip.load(p))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let finish = args.finish.finish()?;
     let recon = model.reconstruct(&clips)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let th = motion::metrics::Thresholds::default();
     for (path, m) in args.inputs.iter().zip(recon) {
-        let m = match args.smooth_s {
-            Some(sigma) => motion::smooth::gaussian(&m, sigma)?,
-            None => m,
-        };
-        let m = if args.plant_root {
-            motion::metrics::plant_root(&m, &th)
-        } else {
-            m
-        };
+        let m = finish.apply(&m)?;
         let name = format!("{}_recon", clip_name(path));
         write_atomic(
             &args.out.join(format!("{name}.bvh")),
@@ -271,7 +283,8 @@ fn sample(args: SampleArgs) -> anyhow::Result<()> {
     if let Some(members) = args.members {
         model = model.with_near_members(members)?;
     }
-    let samples = model.sample_smoothed(args.count, args.prior, args.seed, args.smooth_s)?;
+    let finish = args.finish.finish()?;
+    let samples = model.sample_finished(args.count, args.prior, args.seed, &finish)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let model_name = clip_name(&args.model);

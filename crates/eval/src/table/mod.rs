@@ -133,6 +133,9 @@ pub struct TableConfig {
     /// Draw near codes between this many training clips of a cluster instead
     /// of the VAE's own (the paper's 2; see the vae crate's README).
     pub vae_near_members: Option<usize>,
+    /// Low-pass each VAE sample with a Gaussian of this many seconds before
+    /// its root is planted (0: as decoded; `vae::Finish`).
+    pub vae_smooth_s: f64,
     /// Train and score the prediction models (else synthesis metrics only).
     pub predict: bool,
     pub sets: Vec<SetKind>,
@@ -155,6 +158,7 @@ impl Default for TableConfig {
             vae_iterations: 1500,
             vae_ablation: false,
             vae_near_members: None,
+            vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
@@ -190,6 +194,9 @@ impl TableConfig {
             && !(e.is_finite() && e > 0.0)
         {
             return config("epochs must be positive");
+        }
+        if !(self.vae_smooth_s.is_finite() && (0.0..=1.0).contains(&self.vae_smooth_s)) {
+            return config("the VAE samples' smoothing must be 0-1 s");
         }
         self.physics.validate()
     }
@@ -420,6 +427,10 @@ fn synthesised_sets(
             vae_runs.push(("vae_noadv", Some(0.0)));
         }
     }
+    let finish = vae::Finish {
+        smooth_s: (config.vae_smooth_s > 0.0).then_some(config.vae_smooth_s),
+        plant_root: true,
+    };
     for (tag, weight) in vae_runs {
         let t = Instant::now();
         let cache = work.join(format!("{tag}-{}it", config.vae_iterations));
@@ -431,11 +442,11 @@ fn synthesised_sets(
             .insert(tag.into(), t.elapsed().as_secs_f64());
         sets.push((
             format!("{tag}_near"),
-            sample_vae(&model, count, Prior::Near, 0)?,
+            sample_vae(&model, count, Prior::Near, 0, &finish)?,
         ));
         sets.push((
             format!("{tag}_prior"),
-            sample_vae(&model, count, Prior::Normal, 0)?,
+            sample_vae(&model, count, Prior::Normal, 0, &finish)?,
         ));
     }
     if config.has(SetKind::VaeIk) {

@@ -35,6 +35,7 @@ impl TableConfig {
             "noise_sigma_deg": c.noise_sigma_deg,
             "vae_iterations": c.vae_iterations,
             "vae_ablation": c.vae_ablation,
+            "vae_smooth_s": c.vae_smooth_s,
             "sets": c.sets,
             "physics": c.sets.contains(&SetKind::Physics).then_some(&c.physics),
         });
