@@ -27,21 +27,15 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     ]));
     assert!(model.join("weights.safetensors").is_file());
     assert!(model.join("model.json").is_file());
-    ok(motionaug(&[
-        "vae",
-        "sample",
-        model_s,
-        "--count",
-        "3",
-        "--out",
-        out_s,
-        "--prior",
-        "near",
-        "--seed",
-        "4",
-        "--smooth-s",
-        "0",
-    ]));
+    // Three near samples, seed 4, into `out`, low-passed over `smooth_s`.
+    let sample = |out: &str, smooth_s: &str| {
+        let smooth = format!("--smooth-s={smooth_s}");
+        motionaug(&[
+            "vae", "sample", model_s, "--count", "3", "--out", out, "--prior", "near", "--seed",
+            "4", &smooth,
+        ])
+    };
+    ok(sample(out_s, "0"));
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
     let entries = manifest.as_array().unwrap();
@@ -55,21 +49,7 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     // Smoothed samples (the default, here wider): the same clips' lengths,
     // less jerk than as decoded.
     let smooth = dir.path().join("smooth");
-    ok(motionaug(&[
-        "vae",
-        "sample",
-        model_s,
-        "--count",
-        "3",
-        "--out",
-        smooth.to_str().unwrap(),
-        "--prior",
-        "near",
-        "--seed",
-        "4",
-        "--smooth-s",
-        "0.1",
-    ]));
+    ok(sample(smooth.to_str().unwrap(), "0.1"));
     let jerk = |dir: &std::path::Path, e: &serde_json::Value| {
         let m =
             motion::io::load(dir.join(e["npz"].as_str().unwrap()), &Default::default()).unwrap();
@@ -116,16 +96,8 @@ fn vae_trains_saves_and_samples_bvh_npz_and_a_manifest() {
     let seconds = |m: &motion::Motion| (m.frames() - 1) as f64 / m.fps();
     assert!((seconds(&m) - seconds(&input)).abs() < 0.1);
     failed(motionaug(&["vae", "reconstruct", model_s, "--out", out_s]));
-    failed(motionaug(&[
-        "vae",
-        "sample",
-        model_s,
-        "--count",
-        "1",
-        "--out",
-        out_s,
-        "--smooth-s=-0.1",
-    ]));
+    let e = failed(sample(out_s, "-0.1"));
+    assert!(e.contains("--smooth-s"), "{e}");
 }
 
 #[test]
