@@ -83,7 +83,8 @@ pub struct VaeStep {
     pub mixed_motion_weight: f64,
     /// Low-pass each sample with a Gaussian of this many seconds (0: as
     /// decoded; `vae::Finish`): decoded clips jitter, and smoothed jog samples
-    /// pass physical correction 10/30 where raw ones pass 4/30.
+    /// pass physical correction 15/30 where the same samples raw pass 2/30
+    /// (crates/vae/README.md, session 19).
     pub smooth_s: f64,
     /// Re-integrate each sample's root path from its planted feet.
     pub plant_root: bool,
@@ -92,10 +93,7 @@ pub struct VaeStep {
 impl VaeStep {
     /// What is done to each decoded sample.
     pub fn finish(&self) -> vae::Finish {
-        vae::Finish {
-            smooth_s: (self.smooth_s > 0.0).then_some(self.smooth_s),
-            plant_root: self.plant_root,
-        }
+        vae::Finish::new(self.smooth_s, self.plant_root)
     }
 }
 

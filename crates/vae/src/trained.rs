@@ -117,6 +117,15 @@ impl Default for Finish {
 pub const DEFAULT_SMOOTH_S: f64 = 0.05;
 
 impl Finish {
+    /// A low-pass of `smooth_s` seconds (0: none), then planting or not: the
+    /// one number every caller's options give.
+    pub fn new(smooth_s: f64, plant_root: bool) -> Self {
+        Finish {
+            smooth_s: (smooth_s > 0.0).then_some(smooth_s),
+            plant_root,
+        }
+    }
+
     /// `motion` finished.
     pub fn apply(&self, motion: &Motion) -> Result<Motion> {
         let mut m = match self.smooth_s {

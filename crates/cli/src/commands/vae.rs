@@ -68,10 +68,7 @@ impl FinishArgs {
         if !(self.smooth_s.is_finite() && self.smooth_s >= 0.0) {
             bail!("--smooth-s must be a finite number of seconds >= 0");
         }
-        Ok(vae::Finish {
-            smooth_s: (self.smooth_s > 0.0).then_some(self.smooth_s),
-            plant_root: !self.no_plant,
-        })
+        Ok(vae::Finish::new(self.smooth_s, !self.no_plant))
     }
 }
 

@@ -427,10 +427,7 @@ fn synthesised_sets(
             vae_runs.push(("vae_noadv", Some(0.0)));
         }
     }
-    let finish = vae::Finish {
-        smooth_s: (config.vae_smooth_s > 0.0).then_some(config.vae_smooth_s),
-        plant_root: true,
-    };
+    let finish = vae::Finish::new(config.vae_smooth_s, true);
     for (tag, weight) in vae_runs {
         let t = Instant::now();
         let cache = work.join(format!("{tag}-{}it", config.vae_iterations));
