@@ -127,6 +127,36 @@
 //! targets needs `ImpulseJointSet::get_mut`, which makes rapier rebuild its
 //! joint assembly (colouring, builders, island links) at every step: about
 //! 3-5 % of a step, with no public way around it in rapier 0.36.
+//!
+//! ## Many characters in one world: no gain (session 20)
+//!
+//! The "batched environments" idea (issue 12): step the 8 PPO environments
+//! of a job as 8 characters of one rapier world, hoping rapier's SIMD joint
+//! path and its fixed per-step costs amortise over them. Measured with a
+//! throwaway test (not kept): K copies of the CMU humanoid
+//! (`fixtures::cmu_humanoid`, 16 bodies) 3 m apart on the one ground,
+//! default [`SimParams`], motors holding the rest pose, 600 world steps
+//! after 20 to settle, release build, one core:
+//!
+//! | characters K | us per world step | us per character step |
+//! |---|---|---|
+//! | 1 | 66.6 | 66.6 |
+//! | 4 | 233.6 | 58.4 |
+//! | 8 | 449.1 | 56.1 |
+//! | 16 | 918.9 | 57.4 |
+//! | 32 | 2,036.1 | 63.6 |
+//! | 64 | 3,551.7 | 55.5 |
+//!
+//! At most 16 % per character, at K that no job uses. The reason is in
+//! rapier 0.36 itself: a joint with a motor on a free axis never takes the
+//! SIMD path (`GenericJoint::supports_simd_constraints` requires the motor
+//! axes to be locked ones), and the staged solver solves a joint colour
+//! serially unless it holds at least 64 joints (`JOINT_BATCH *
+//! LAYOUT_REF_WORKERS / 2`). Every joint here is motorised on its three
+//! angular axes, so the cost per character is the scalar joint rows, with or
+//! without company. Batched worlds were therefore not built; the 100x
+//! target stays limited by this solver (48x measured side by side with
+//! pybullet in session 15).
 
 use glam::{Mat3, Quat, Vec3};
 use rapier3d::prelude::*;
