@@ -352,36 +352,77 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
         by_class.iter().map(|(class, _)| class.to_string()),
     );
     for other in &others {
-        let mut line = format!("| {other} |");
-        for (_, cells) in &by_class {
-            let a = runs(cells, m, full);
-            let b = runs(cells, m, other);
-            let pairs: Vec<(&Horizons, &Horizons)> = a
-                .iter()
-                .filter_map(|(k, ha)| Some((*ha, *b.get(k)?)))
-                .collect();
-            if pairs.is_empty() {
-                line.push_str(" - |");
-                continue;
-            }
-            let cols: Vec<String> = HORIZONS_MS
-                .iter()
-                .map(|ms| {
-                    let key = ms.to_string();
-                    let d: Vec<f64> = pairs
-                        .iter()
-                        .filter_map(|(ha, hb)| Some(ha.get(&key)? - hb.get(&key)?))
-                        .collect();
-                    let (mean, sd) = mean_sd(&d);
-                    let beyond = d.len() > 1 && mean.abs() > 2.0 * sd / (d.len() as f64).sqrt();
-                    format!("{mean:+.3} +- {sd:.3}{}", if beyond { "*" } else { "" })
-                })
-                .collect();
-            let _ = write!(line, " {} |", cols.join(" / "));
-        }
-        let _ = writeln!(md, "{line}");
+        paired_row(md, other, &by_class, m, full, other);
     }
     md.push('\n');
+
+    // What correction and debiasing did to each set: against the same clips
+    // uncorrected (`_sub`), paired the same way.
+    let effects: Vec<(String, String)> = ["ik", "vae", "vae_ik"]
+        .into_iter()
+        .flat_map(|stem| {
+            ["corrected", "debiased"]
+                .map(|stage| (format!("{stem}_{stage}"), format!("{stem}_sub")))
+        })
+        .filter(|(a, b)| made(a) && made(b))
+        .collect();
+    if effects.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "Paired differences, each corrected or debiased set minus the same clips uncorrected (`_sub`), over the same runs; * as above:\n"
+    );
+    header_row(
+        md,
+        "row",
+        by_class.iter().map(|(class, _)| class.to_string()),
+    );
+    for (a, b) in &effects {
+        paired_row(md, &format!("{a} - {b}"), &by_class, m, a, b);
+    }
+    md.push('\n');
+}
+
+/// One row of a paired-difference table: condition `a` minus `b` per class
+/// over the (test actor, seed) runs both have, mean +- sd per horizon, `*`
+/// where the mean exceeds twice its standard error.
+fn paired_row(
+    md: &mut String,
+    label: &str,
+    by_class: &[(&str, Vec<&TableCell>)],
+    m: &str,
+    a: &str,
+    b: &str,
+) {
+    let mut line = format!("| {label} |");
+    for (_, cells) in by_class {
+        let ra = runs(cells, m, a);
+        let rb = runs(cells, m, b);
+        let pairs: Vec<(&Horizons, &Horizons)> = ra
+            .iter()
+            .filter_map(|(k, ha)| Some((*ha, *rb.get(k)?)))
+            .collect();
+        if pairs.is_empty() {
+            line.push_str(" - |");
+            continue;
+        }
+        let cols: Vec<String> = HORIZONS_MS
+            .iter()
+            .map(|ms| {
+                let key = ms.to_string();
+                let d: Vec<f64> = pairs
+                    .iter()
+                    .filter_map(|(ha, hb)| Some(ha.get(&key)? - hb.get(&key)?))
+                    .collect();
+                let (mean, sd) = mean_sd(&d);
+                let beyond = d.len() > 1 && mean.abs() > 2.0 * sd / (d.len() as f64).sqrt();
+                format!("{mean:+.3} +- {sd:.3}{}", if beyond { "*" } else { "" })
+            })
+            .collect();
+        let _ = write!(line, " {} |", cols.join(" / "));
+    }
+    let _ = writeln!(md, "{line}");
 }
 
 /// One Markdown table: a row per synthesised set, a column per class.
@@ -606,6 +647,46 @@ mod tests {
         assert!(md.contains("| noise | -0.100 +- 0.231 /"), "{md}");
         // One actor, one seed: no aggregate section.
         assert!(!table().to_markdown().contains("over test actors and seeds"));
+    }
+
+    #[test]
+    fn corrected_and_debiased_sets_are_paired_with_the_same_clips_uncorrected() {
+        // One actor, two seeds: corrected 0.2 below the uncorrected clips in
+        // both runs, debiased +0.1 and -0.1 (no consistent sign).
+        let cell = TableCell {
+            class: "kick".into(),
+            test_actor: "bd".into(),
+            predict: [(
+                "gcn".to_string(),
+                [
+                    ("no_aug".to_string(), seeds(2.0, 2.2)),
+                    ("vae_sub".to_string(), seeds(1.0, 1.2)),
+                    ("vae_corrected".to_string(), seeds(0.8, 1.0)),
+                    ("vae_debiased".to_string(), seeds(1.1, 1.1)),
+                ]
+                .into_iter()
+                .collect(),
+            )]
+            .into_iter()
+            .collect(),
+            ..TableCell::default()
+        };
+        let mut t = table();
+        t.config.train.seeds = vec![0, 1];
+        t.config.models = vec![ModelKind::Gcn];
+        t.cells = vec![cell];
+        let md = t.to_markdown();
+        assert!(md.contains("minus the same clips uncorrected"), "{md}");
+        assert!(
+            md.contains("| vae_corrected - vae_sub | -0.200 +- 0.000* /"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| vae_debiased - vae_sub | +0.000 +- 0.141 /"),
+            "{md}"
+        );
+        // No IK rows were made: no IK line.
+        assert!(!md.contains("ik_corrected - ik_sub"), "{md}");
     }
 
     #[test]
