@@ -599,26 +599,34 @@ mod tests {
         }
     }
 
-    #[test]
-    fn over_actors_and_seeds_the_full_method_is_paired_with_each_row() {
-        // Two test actors x two seeds; the debiased row is 0.1 below no_aug
-        // in every run, and +0.1 or -0.3 from noise (no consistent sign).
-        let cell = |actor: &str, base: f64| TableCell {
+    /// A kick cell of `actor` with GCN results only, one per named condition.
+    fn gcn_cell(actor: &str, rows: Vec<(&str, ConditionResult)>) -> TableCell {
+        TableCell {
             class: "kick".into(),
             test_actor: actor.into(),
             predict: [(
                 "gcn".to_string(),
-                [
-                    ("no_aug".to_string(), seeds(base, base + 0.2)),
-                    ("noise".to_string(), seeds(base - 0.2, base + 0.4)),
-                    ("vae_debiased".to_string(), seeds(base - 0.1, base + 0.1)),
-                ]
-                .into_iter()
-                .collect(),
+                rows.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
             )]
             .into_iter()
             .collect(),
             ..TableCell::default()
+        }
+    }
+
+    #[test]
+    fn over_actors_and_seeds_the_full_method_is_paired_with_each_row() {
+        // Two test actors x two seeds; the debiased row is 0.1 below no_aug
+        // in every run, and +0.1 or -0.3 from noise (no consistent sign).
+        let cell = |actor: &str, base: f64| {
+            gcn_cell(
+                actor,
+                vec![
+                    ("no_aug", seeds(base, base + 0.2)),
+                    ("noise", seeds(base - 0.2, base + 0.4)),
+                    ("vae_debiased", seeds(base - 0.1, base + 0.1)),
+                ],
+            )
         };
         let mut t = table();
         t.config.test_actors = vec!["bd".into(), "mm".into()];
@@ -653,24 +661,15 @@ mod tests {
     fn corrected_and_debiased_sets_are_paired_with_the_same_clips_uncorrected() {
         // One actor, two seeds: corrected 0.2 below the uncorrected clips in
         // both runs, debiased +0.1 and -0.1 (no consistent sign).
-        let cell = TableCell {
-            class: "kick".into(),
-            test_actor: "bd".into(),
-            predict: [(
-                "gcn".to_string(),
-                [
-                    ("no_aug".to_string(), seeds(2.0, 2.2)),
-                    ("vae_sub".to_string(), seeds(1.0, 1.2)),
-                    ("vae_corrected".to_string(), seeds(0.8, 1.0)),
-                    ("vae_debiased".to_string(), seeds(1.1, 1.1)),
-                ]
-                .into_iter()
-                .collect(),
-            )]
-            .into_iter()
-            .collect(),
-            ..TableCell::default()
-        };
+        let cell = gcn_cell(
+            "bd",
+            vec![
+                ("no_aug", seeds(2.0, 2.2)),
+                ("vae_sub", seeds(1.0, 1.2)),
+                ("vae_corrected", seeds(0.8, 1.0)),
+                ("vae_debiased", seeds(1.1, 1.1)),
+            ],
+        );
         let mut t = table();
         t.config.train.seeds = vec![0, 1];
         t.config.models = vec![ModelKind::Gcn];
