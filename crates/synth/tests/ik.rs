@@ -112,6 +112,8 @@ fn every_preset_runs_and_hand_presets_move_a_hand() {
         Preset::Jog,
         Preset::Sneak,
         Preset::Throw,
+        Preset::Hop,
+        Preset::Squat,
     ] {
         let out = ik(&m, &IkParams::preset(preset), &mut rng_from_seed(1)).unwrap();
         let name = out.sampled["effector"].as_str().unwrap().to_string();

@@ -62,6 +62,8 @@ fn ik_presets_on_hdm05_reach_targets_with_exact_bones() {
         ("dg", "depositFloorR", 13, Preset::Deposit, "rwrist"),
         ("tr", "jogLeftCircle4StepsRstart", 14, Preset::Jog, ""),
         ("bd", "sneak2StepsLStart", 1, Preset::Sneak, ""),
+        ("bk", "hopBothLegs1hops", 13, Preset::Hop, ""),
+        ("tr", "squat1Reps", 41, Preset::Squat, ""),
     ];
     for (actor, class, n, preset, effector) in cases {
         let m = clip(actor, class, n);

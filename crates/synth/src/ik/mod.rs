@@ -3,7 +3,9 @@
 //! 1. Effector: a joint by name, or the foot/hand (ankle/wrist joint) reaching
 //!    farthest from the root horizontally over the clip; a preset picks foot or
 //!    hand as the paper does (foot for punch, kick, walk, jog, sneak; hand for
-//!    grab, deposit, throw).
+//!    grab, deposit, throw). Two presets are ours, not the paper's, for the
+//!    HDM05 classes it does not use: hop (a foot, the locomotion fan) and squat
+//!    (a hand, reach and heading varied, height kept within 20 %).
 //! 2. Keyframe: the frame where the effector is farthest from the root
 //!    horizontally, shifted by a uniform jitter in `[-key_jitter_s, +key_jitter_s]`
 //!    (default 0.1 s, as in the authors' configuration files).
@@ -44,7 +46,8 @@ pub use limb::{EffectorOrientation, Limb};
 
 use crate::{Augmented, Range, SynthError, SynthRng, names};
 
-/// The paper's action classes.
+/// The paper's action classes, and two of ours (hop, squat) so every HDM05
+/// class of `../shared/data/hdm05` has IK edits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
@@ -56,6 +59,12 @@ pub enum Preset {
     Jog,
     Sneak,
     Throw,
+    /// Not in the paper: a foot with the locomotion fan (the landing stance
+    /// changes; the hop itself is left to physics).
+    Hop,
+    /// Not in the paper: a hand (the arms that balance the squat) swung up to
+    /// 45 degrees sideways, its reach scaled 0.5-2x and its height 0.8-1.2x.
+    Squat,
 }
 
 /// Which kind of end effector.
@@ -75,7 +84,8 @@ pub struct Fan {
 }
 
 impl Preset {
-    /// Ranges of MotionAug Sec. 4.3 (punch, kick, walk) and Sec. 10 (the rest).
+    /// Ranges of MotionAug Sec. 4.3 (punch, kick, walk) and Sec. 10 (grab,
+    /// deposit, jog, sneak, throw); hop and squat are ours.
     pub fn fan(self) -> Fan {
         let wide = Range(0.5, 2.0);
         let one = Range(1.0, 1.0);
@@ -90,18 +100,24 @@ impl Preset {
                 h: one,
                 theta: Range(-1.7, 1.7),
             },
-            Preset::Walk | Preset::Jog | Preset::Sneak => Fan {
+            Preset::Walk | Preset::Jog | Preset::Sneak | Preset::Hop => Fan {
                 r: wide,
                 h: one,
                 theta: Range(-0.3, 0.3),
             },
+            Preset::Squat => Fan {
+                r: wide,
+                h: Range(0.8, 1.2),
+                theta: Range(-0.785, 0.785),
+            },
         }
     }
 
-    /// The paper's effector: a hand for grab, deposit and throw, else a foot.
+    /// The paper's effector: a hand for grab, deposit and throw (and squat),
+    /// else a foot.
     pub fn limb(self) -> Limbs {
         match self {
-            Preset::Grab | Preset::Deposit | Preset::Throw => Limbs::Hand,
+            Preset::Grab | Preset::Deposit | Preset::Throw | Preset::Squat => Limbs::Hand,
             _ => Limbs::Foot,
         }
     }
