@@ -8,6 +8,16 @@
 //! `original - corrected`; applying adds the predicted change to a corrected
 //! clip's rotations, keeps its root translation and then puts its planted feet
 //! back where the corrected clip has them ([`crate::contacts`]).
+//!
+//! Why a held-out check: the pairs are few (the accepted originals of one
+//! training fold, ~20 clips), and a 4 x 512 network fits any 20 clips, so
+//! the training loss says nothing about the clips it will be applied to. A
+//! share of the pairs (whole clips) is held out of a first fit, which picks
+//! the number of steps with the lowest held-out loss and the gain in `[0, 1]`
+//! that fits the held-out pairs best (least squares); the network is then
+//! fitted on all pairs for that many steps and its change scaled by that
+//! gain, so a network that does not generalise is applied weakly or barely
+//! trained rather than adding its noise to every clip.
 
 use std::path::Path;
 use std::time::Instant;
@@ -38,6 +48,10 @@ pub struct TrainConfig {
     pub learning_rate: f64,
     pub weight_decay: f64,
     pub seed: u64,
+    /// Share of the pairs (whole clips, at least one when there are two or
+    /// more) held out to pick the best weights and the gain; 0 trains on all
+    /// pairs for `iterations` steps and applies the change at full strength.
+    pub validation_fraction: f64,
     /// How the corrected clip's foot contacts are kept when applying.
     pub contacts: ContactConfig,
 }
@@ -52,6 +66,7 @@ impl Default for TrainConfig {
             learning_rate: 1e-3,
             weight_decay: 1e-4,
             seed: 0,
+            validation_fraction: 0.2,
             contacts: ContactConfig::default(),
         }
     }
@@ -65,6 +80,12 @@ impl TrainConfig {
         }
         if self.batch_size == 0 {
             return bad("batch_size must be at least 1".into());
+        }
+        if !(0.0..1.0).contains(&self.validation_fraction) {
+            return bad(format!(
+                "validation_fraction {} is not in [0, 1)",
+                self.validation_fraction
+            ));
         }
         if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
             return bad(format!(
@@ -89,8 +110,32 @@ pub struct TrainReport {
     pub loss_before: f64,
     /// The same after training (training set).
     pub loss_after: f64,
+    /// Pairs held out (not trained on) to choose the weights and the gain.
+    #[serde(default)]
+    pub validation_pairs: usize,
+    /// Held-out mean squared change of rotations (6D, raw units) left by doing
+    /// nothing: corrected vs original.
+    #[serde(default)]
+    pub validation_loss_zero: Option<f64>,
+    /// The same after debiasing (best weights, gain applied): below
+    /// `validation_loss_zero` when the network generalises.
+    #[serde(default)]
+    pub validation_loss: Option<f64>,
+    /// Step whose weights were kept (the last when nothing is held out).
+    #[serde(default)]
+    pub best_iteration: usize,
+    /// Scale of the predicted change when applied, in `[0, 1]`.
+    #[serde(default = "full_gain")]
+    pub gain: f64,
     pub wall_s: f64,
 }
+
+fn full_gain() -> f64 {
+    1.0
+}
+
+/// Held-out loss is checked every this many steps.
+const CHECK_EVERY: usize = 50;
 
 /// Mean and standard deviation per column (std floored so constant columns stay finite).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -190,6 +235,10 @@ fn aligned(corrected: &Motion, original: &Motion) -> Result<(Vec<f32>, Vec<f32>)
 }
 
 /// Train on pairs `(corrected original, original)`.
+///
+/// With pairs held out: a first fit on the rest scores the held-out pairs
+/// every [`CHECK_EVERY`] steps and picks the step and the gain; the model is
+/// then fitted on all pairs for that many steps and applied with that gain.
 pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debiaser, TrainReport)> {
     config.validate()?;
     let span = tracing::info_span!("debias_train", pairs = pairs.len());
@@ -200,9 +249,8 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     };
     let joints = first.joints();
     let fps = first.fps();
-    let (sd, id, od) = (state_dim(joints), input_dim(joints), output_dim(joints));
-    let mut x_rows = Vec::new();
-    let mut y_rows = Vec::new();
+    let held_out = held_out(pairs.len(), config.validation_fraction, config.seed);
+    let (mut all, mut kept, mut val) = (Rows::default(), Rows::default(), Rows::default());
     for (i, (corrected, original)) in pairs.iter().enumerate() {
         if corrected.joints() != joints || (corrected.fps() - fps).abs() > 1e-6 {
             return Err(DebiasError::Data(format!(
@@ -212,20 +260,118 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
             )));
         }
         let (c, o) = aligned(corrected, original)?;
-        x_rows.extend(inputs(&c, sd));
+        let sd = state_dim(joints);
+        let x = inputs(&c, sd);
         let (c, o) = (rotations_of(&c, joints), rotations_of(&o, joints));
-        y_rows.extend(o.iter().zip(&c).map(|(o, c)| o - c));
+        let y: Vec<f32> = o.iter().zip(&c).map(|(o, c)| o - c).collect();
+        let part = if held_out.contains(&i) {
+            &mut val
+        } else {
+            &mut kept
+        };
+        part.x.extend_from_slice(&x);
+        part.y.extend_from_slice(&y);
+        all.x.extend(x);
+        all.y.extend(y);
     }
-    let frames = y_rows.len() / od;
+    let (best_iteration, gain, validation) = if held_out.is_empty() {
+        (config.iterations, 1.0, None)
+    } else {
+        let (_, best) = fit(&kept, joints, config, config.iterations, Some(&val))?;
+        let best = best.ok_or_else(|| DebiasError::Data("no held-out check ran".into()))?;
+        (best.iteration, best.gain, Some((best.loss_zero, best.loss)))
+    };
+    let (fitted, _) = fit(&all, joints, config, best_iteration, None)?;
+    let report = TrainReport {
+        pairs: pairs.len(),
+        frames: fitted.frames,
+        iterations: best_iteration,
+        loss_before: fitted.loss_before,
+        loss_after: fitted.loss_after,
+        validation_pairs: held_out.len(),
+        validation_loss_zero: validation.map(|v| v.0),
+        validation_loss: validation.map(|v| v.1),
+        best_iteration,
+        gain,
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    tracing::info!(
+        loss_before = report.loss_before,
+        loss_after = report.loss_after,
+        frames = report.frames,
+        gain,
+        best_iteration,
+        validation_loss_zero = ?report.validation_loss_zero,
+        validation_loss = ?report.validation_loss,
+        "debias trained"
+    );
+    let meta = Meta {
+        format: FORMAT,
+        joints,
+        fps,
+        mlp: fitted.mlp_config,
+        contacts: config.contacts,
+        sole_height_m: contacts::sole_height(
+            &pairs.iter().map(|(c, _)| c).collect::<Vec<_>>(),
+            &config.contacts,
+        ),
+        input: fitted.input,
+        output: fitted.output,
+        report: report.clone(),
+    };
+    let (params, mlp) = (fitted.params, fitted.mlp);
+    Ok((Debiaser { meta, params, mlp }, report))
+}
+
+/// Per-frame inputs and targets (row-major) of some pairs.
+#[derive(Default)]
+struct Rows {
+    x: Vec<f32>,
+    y: Vec<f32>,
+}
+
+/// A network fitted on some rows, with the standardisation it was fitted with.
+struct Fitted {
+    mlp_config: MlpConfig,
+    params: Params,
+    mlp: Mlp,
+    input: Standardiser,
+    output: Standardiser,
+    frames: usize,
+    /// Training loss (standardised units) of the zero change and after fitting.
+    loss_before: f64,
+    loss_after: f64,
+}
+
+/// Fit a fresh network (seeded by `config.seed`) on `rows` for `steps` steps;
+/// with `held_out`, score it every [`CHECK_EVERY`] steps and after the last,
+/// and return the best step.
+fn fit(
+    rows: &Rows,
+    joints: usize,
+    config: &TrainConfig,
+    steps: usize,
+    held_out: Option<&Rows>,
+) -> Result<(Fitted, Option<Best>)> {
+    let (id, od) = (input_dim(joints), output_dim(joints));
+    let frames = rows.y.len() / od;
     if frames < 2 {
         return Err(DebiasError::Data(
             "fewer than two frames of training data".into(),
         ));
     }
-    let input = Standardiser::fit(&x_rows, id);
-    let output = Standardiser::fit(&y_rows, od);
-    let x = Tensor::from_vec(input.apply(&x_rows), (frames, id), &Device::Cpu)?;
-    let y = Tensor::from_vec(output.apply(&y_rows), (frames, od), &Device::Cpu)?;
+    let input = Standardiser::fit(&rows.x, id);
+    let output = Standardiser::fit(&rows.y, od);
+    let x = Tensor::from_vec(input.apply(&rows.x), (frames, id), &Device::Cpu)?;
+    let y = Tensor::from_vec(output.apply(&rows.y), (frames, od), &Device::Cpu)?;
+    let x_val = match held_out {
+        Some(v) => Some(Tensor::from_vec(
+            input.apply(&v.x),
+            (v.y.len() / od, id),
+            &Device::Cpu,
+        )?),
+        None => None,
+    };
 
     let mlp_config = MlpConfig::new(id, &config.hidden, od);
     let params = Params::new(config.seed);
@@ -244,11 +390,21 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         .mean_all()?
         .to_scalar::<f32>()? as f64;
 
+    let mut best: Option<Best> = None;
+    let check = |it: usize, best: Option<Best>| -> Result<Option<Best>> {
+        match (&x_val, held_out) {
+            (Some(x_val), Some(v)) => Best::keep(best, it, &mlp, x_val, &v.y, &output),
+            _ => Ok(best),
+        }
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut order: Vec<u32> = (0..frames as u32).collect();
     let mut cursor = frames;
     let batch = config.batch_size.min(frames);
-    for it in 0..config.iterations {
+    for it in 0..steps {
+        if it % CHECK_EVERY == 0 {
+            best = check(it, best)?;
+        }
         if cursor + batch > frames {
             order.shuffle(&mut rng);
             cursor = 0;
@@ -262,36 +418,85 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
             tracing::debug!(it, loss = loss.to_scalar::<f32>()?, "debias step");
         }
     }
+    best = check(steps, best)?;
     let loss_after = mlp
         .forward(&x)?
         .sub(&y)?
         .sqr()?
         .mean_all()?
         .to_scalar::<f32>()? as f64;
-    let report = TrainReport {
-        pairs: pairs.len(),
-        frames,
-        iterations: config.iterations,
-        loss_before,
-        loss_after,
-        wall_s: started.elapsed().as_secs_f64(),
-    };
-    tracing::info!(loss_before, loss_after, frames, "debias trained");
-    let meta = Meta {
-        format: FORMAT,
-        joints,
-        fps,
-        mlp: mlp_config,
-        contacts: config.contacts,
-        sole_height_m: contacts::sole_height(
-            &pairs.iter().map(|(c, _)| c).collect::<Vec<_>>(),
-            &config.contacts,
-        ),
+    let fitted = Fitted {
+        mlp_config,
+        params,
+        mlp,
         input,
         output,
-        report: report.clone(),
+        frames,
+        loss_before,
+        loss_after,
     };
-    Ok((Debiaser { meta, params, mlp }, report))
+    Ok((fitted, best))
+}
+
+/// Which pairs are held out: `round(fraction * n)` of them, at least one when
+/// `n >= 2` and `fraction > 0`, never all; chosen by the seed.
+fn held_out(n: usize, fraction: f64, seed: u64) -> Vec<usize> {
+    if n < 2 || fraction <= 0.0 {
+        return Vec::new();
+    }
+    let k = ((fraction * n as f64).round() as usize).clamp(1, n - 1);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_da7a));
+    order.truncate(k);
+    order
+}
+
+/// The step with the lowest held-out loss so far, and its gain.
+struct Best {
+    iteration: usize,
+    gain: f64,
+    loss_zero: f64,
+    loss: f64,
+}
+
+impl Best {
+    /// Score the current weights on the held-out frames (raw units, with their
+    /// least-squares gain in [0, 1]) and keep them if they beat `best`.
+    fn keep(
+        best: Option<Best>,
+        iteration: usize,
+        mlp: &Mlp,
+        x_val: &Tensor,
+        y_val: &[f32],
+        output: &Standardiser,
+    ) -> Result<Option<Best>> {
+        let pred = mlp.forward(x_val)?.flatten_all()?.to_vec1::<f32>()?;
+        let pred = output.invert(&pred);
+        let (mut py, mut pp, mut yy) = (0.0f64, 0.0f64, 0.0f64);
+        for (p, y) in pred.iter().zip(y_val) {
+            let (p, y) = (*p as f64, *y as f64);
+            py += p * y;
+            pp += p * p;
+            yy += y * y;
+        }
+        let gain = if pp > 0.0 {
+            (py / pp).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let n = y_val.len().max(1) as f64;
+        // sum (g p - y)^2 = g^2 pp - 2 g py + yy
+        let loss = (gain * gain * pp - 2.0 * gain * py + yy).max(0.0) / n;
+        if best.as_ref().is_some_and(|b| b.loss <= loss) {
+            return Ok(best);
+        }
+        Ok(Some(Best {
+            iteration,
+            gain,
+            loss_zero: yy / n,
+            loss,
+        }))
+    }
 }
 
 impl Debiaser {
@@ -334,7 +539,14 @@ impl Debiaser {
         let x = self.meta.input.apply(&inputs(&s, sd));
         let x = Tensor::from_vec(x, (frames, 2 * sd), &Device::Cpu)?;
         let delta = self.mlp.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
-        let delta = self.meta.output.invert(&delta);
+        let gain = self.meta.report.gain as f32;
+        let delta: Vec<f32> = self
+            .meta
+            .output
+            .invert(&delta)
+            .iter()
+            .map(|d| gain * d)
+            .collect();
         let rotations = rotations_of(&s, self.meta.joints);
         let new: Vec<f32> = rotations.iter().zip(&delta).map(|(a, d)| a + d).collect();
         let debiased = apply_rotations(&corrected, &new)?;
@@ -458,6 +670,87 @@ mod tests {
         assert_eq!(debiased.root_translation(), corrected.root_translation());
     }
 
+    /// `m` with the left upper arm turned by a random angle in +-0.3 rad in
+    /// every frame (a different draw per seed): no input predicts it.
+    fn jittered(m: &Motion, seed: u64) -> Motion {
+        use rand::Rng;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let nj = m.joints();
+        let [arm, _] = bent_joints(m);
+        let mut rot = m.rotations().to_vec();
+        for t in 0..m.frames() {
+            rot[t * nj + arm] *= DQuat::from_rotation_x(rng.random_range(-0.3..0.3));
+        }
+        m.with_frames(m.fps(), m.root_translation().to_vec(), rot)
+            .expect("motion")
+    }
+
+    fn held_out_config() -> TrainConfig {
+        TrainConfig {
+            validation_fraction: 0.4,
+            ..tiny()
+        }
+    }
+
+    #[test]
+    fn a_bias_that_holds_on_held_out_pairs_is_applied_at_full_strength() {
+        let pairs: Vec<_> = (0..5)
+            .map(|i| {
+                let original = jittered(&walk(), 100 + i);
+                (biased(&original), original)
+            })
+            .collect();
+        let (model, report) = train(&pairs, &held_out_config()).expect("train");
+        assert_eq!(report.validation_pairs, 2);
+        let (zero, after) = (
+            report.validation_loss_zero.expect("held out"),
+            report.validation_loss.expect("held out"),
+        );
+        assert!(after < 0.2 * zero, "{report:?}");
+        assert!(report.gain > 0.8, "{report:?}");
+        let (corrected, original) = &pairs[0];
+        let after = error(&model.apply(corrected).expect("apply"), original);
+        assert!(after < 0.3 * error(corrected, original), "{after}");
+    }
+
+    #[test]
+    fn a_change_no_input_predicts_is_barely_applied() {
+        // The corrected clip is always the same; the originals differ by
+        // noise: the training pairs can be memorised, the held-out ones not.
+        let corrected = walk();
+        let pairs: Vec<_> = (0..5)
+            .map(|i| (corrected.clone(), jittered(&corrected, 200 + i)))
+            .collect();
+        let (model, report) = train(&pairs, &held_out_config()).expect("train");
+        // Nothing learnt holds on the held-out pairs: the weights before the
+        // network memorised its pairs are kept.
+        let zero = report.validation_loss_zero.expect("held out");
+        let after = report.validation_loss.expect("held out");
+        assert!(after <= zero && after > 0.9 * zero, "{report:?}");
+        assert!(report.best_iteration < 100, "{report:?}");
+        // Applied, it leaves the clip nearly as corrected.
+        let moved = error(&model.apply(&corrected).expect("apply"), &corrected);
+        assert!(
+            moved < 0.05,
+            "moved the arm and back by {moved} rad per frame"
+        );
+    }
+
+    #[test]
+    fn held_out_pairs_are_whole_clips_and_never_all() {
+        assert!(held_out(1, 0.2, 0).is_empty());
+        assert!(held_out(5, 0.0, 0).is_empty());
+        assert_eq!(held_out(2, 0.2, 0).len(), 1);
+        assert_eq!(held_out(27, 0.2, 0).len(), 5);
+        assert_eq!(held_out(3, 0.9, 0).len(), 2);
+        let mut a = held_out(27, 0.2, 7);
+        a.sort();
+        a.dedup();
+        assert_eq!(a.len(), 5);
+        assert!(a.iter().all(|&i| i < 27));
+        assert_eq!(held_out(27, 0.2, 7), held_out(27, 0.2, 7));
+    }
+
     #[test]
     fn save_load_round_trip_gives_the_same_output() {
         let original = walk();
@@ -502,6 +795,14 @@ mod tests {
         assert!(matches!(train(&[], &tiny()), Err(DebiasError::Data(_))));
         let bad = TrainConfig {
             iterations: 0,
+            ..tiny()
+        };
+        assert!(matches!(
+            train(&[(original.clone(), original.clone())], &bad),
+            Err(DebiasError::Config(_))
+        ));
+        let bad = TrainConfig {
+            validation_fraction: 1.0,
             ..tiny()
         };
         assert!(matches!(

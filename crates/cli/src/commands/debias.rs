@@ -38,6 +38,10 @@ enum What {
         hidden: Vec<usize>,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Share of the pairs held out to keep the best weights and scale the
+        /// change (0: train on all, apply at full strength).
+        #[arg(long, default_value_t = TrainConfig::default().validation_fraction)]
+        validation_fraction: f64,
         /// Do not put the corrected clip's planted feet back after the network
         /// (saved with the model; by default they are, see the debias crate).
         #[arg(long)]
@@ -77,6 +81,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             iterations,
             hidden,
             seed,
+            validation_fraction,
             no_contacts,
             no_flatten_soles,
             no_metric_contacts,
@@ -87,7 +92,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 metric_contacts: !no_metric_contacts,
                 ..debias::ContactConfig::default()
             };
-            train(&pairs, &clip, &out, iterations, hidden, seed, contacts)
+            let config = TrainConfig {
+                iterations,
+                hidden,
+                seed,
+                validation_fraction,
+                contacts,
+                ..TrainConfig::default()
+            };
+            train(&pairs, &clip, &out, &config)
         }
         What::Apply {
             model,
@@ -123,10 +136,7 @@ fn train(
     pairs: &[String],
     clip: &ClipArgs,
     out: &Path,
-    iterations: usize,
-    hidden: Vec<usize>,
-    seed: u64,
-    contacts: debias::ContactConfig,
+    config: &TrainConfig,
 ) -> anyhow::Result<()> {
     let mut loaded = Vec::with_capacity(pairs.len());
     for pair in pairs {
@@ -138,14 +148,7 @@ fn train(
         let corrected = onto(clip.load(&c)?, &original, &c)?;
         loaded.push((corrected, original));
     }
-    let config = TrainConfig {
-        iterations,
-        hidden,
-        seed,
-        contacts,
-        ..TrainConfig::default()
-    };
-    let (model, report) = debias::train(&loaded, &config).context("training the debiaser")?;
+    let (model, report) = debias::train(&loaded, config).context("training the debiaser")?;
     model
         .save(out)
         .with_context(|| format!("cannot write {}", out.display()))?;
@@ -158,6 +161,12 @@ fn train(
         report.wall_s,
         out.display()
     );
+    if let (Some(zero), Some(after)) = (report.validation_loss_zero, report.validation_loss) {
+        eprintln!(
+            "held out {} pairs: change left {:.5} -> {:.5} (step {}, gain {:.2})",
+            report.validation_pairs, zero, after, report.best_iteration, report.gain
+        );
+    }
     Ok(())
 }
 
