@@ -32,11 +32,19 @@
 //! | hop originals | 36 | **30 (83 %)** | 36 | 36 | 36 | 35 | 31 | 0.047 | 0.873 | 0.199 -> 0.038 | 0.9 -> 5.9 | 53 -> 54 | 91 -> 96 |
 //! | hop IK edits | 360 | **332 (92 %)** | 360 | 360 | 360 | 341 | 347 | 0.048 | 0.868 | 0.312 -> 0.041 | 0.9 -> 5.6 | 53 -> 57 | 91 -> 99 |
 //! | hop VAE samples | 360 | **296 (82 %)** | 360 | 360 | 358 | 302 | 352 | 0.073 | 0.873 | 0.043 -> 0.021 | 0.3 -> 4.3 | 52 -> 38 | 95 -> 99 |
+//! | deposit originals | 32 | **19 (59 %)** | 23 | 26 | 32 | 31 | 22 | 0.033 | 0.831 | 0.093 -> 0.024 | 2.4 -> 6.1 | 2 -> 2 | 83 -> 87 |
+//! | deposit IK edits | 320 | **281 (88 %)** | 295 | 295 | 320 | 316 | 296 | 0.026 | 0.891 | 0.093 -> 0.026 | 2.5 -> 3.5 | 2 -> 0 | 83 -> 95 |
+//! | deposit VAE samples | 320 | **99 (31 %)** | 134 | 138 | 231 | 263 | 101 | 0.064 | 0.634 | 0.074 -> 0.037 | 1.7 -> 0.8 | 2 -> 26 | 67 -> 55 |
+//! | squat originals (13 of 52) | 13 | **12 (92 %)** | 13 | 13 | 13 | 13 | 12 | 0.028 | 0.919 | 0.108 -> 0.036 | 2.8 -> 1.2 | 10 -> 1 | 62 -> 96 |
+//! | squat IK edits (of those 13) | 130 | **130 (100 %)** | 130 | 130 | 130 | 130 | 130 | 0.026 | 0.921 | 0.108 -> 0.038 | 2.8 -> 1.9 | 10 -> 2 | 62 -> 98 |
+//! | squat VAE samples | 130 | **127 (98 %)** | 130 | 130 | 130 | 130 | 127 | 0.023 | 0.932 | 0.075 -> 0.027 | 0.8 -> 0.8 | 16 -> 0 | 39 -> 97 |
 //!
 //! | class | corrections | VAE training s | class tracker (150 its) s, originals as is | variants as is | second tracker (300 its) s, on, as is | clips s | class total s | **s per clip** |
 //! |---|---|---|---|---|---|---|---|---|
 //! | grab | 609 | 852 | 156, 18/29 | 384/580 | 443, 196, 130 | 922 | 2,403 | **3.9** |
 //! | hop | 756 | 386 | 214, 22/36 | 263/720 | 509, 457, 280 | 2,263 | 3,394 | **4.5** |
+//! | deposit | 672 | 1,393 | 189, 6/32 | 55/640 | 588, 585, 190 | 6,094 | 8,315 | **12.4** |
+//! | squat (13 clips, 273 corrections) | 273 | (3,309, niced behind the other runs) | 170 (on all 52), 32/52 | 132/260 | 352, 128, 121 | 108 | 636 without the VAE | 2.3 without the VAE |
 //!
 //! Hop is a flight phase for half of every clip (floating 52-57 % before and
 //! after is the jump, not a fault) and its landings press the feet 4-6 mm
@@ -45,6 +53,16 @@
 //! (every clip, 1,800 s) accepted 36/36. Hop's VAE samples fail on skating
 //! (58 of 64): their input skates little (0.043 m/s) and the output must not
 //! skate more than its input.
+//!
+//! Deposit (reaching to the floor) is the hard class: with this short tracker
+//! only 6 of 32 originals pass as is and 19 after fine-tuning (falls 9, soles
+//! 10; sessions 14 and 17 accepted 30-32 of 32 with the recipe's default
+//! tracker, every clip, 1,800 s), and its VAE samples pass 99 of 320 (31 %,
+//! below the 60 % target): 186 fall, 219 fail the soles. Its 12.4 s per clip
+//! is within the 15 s target but was measured while clippy, the CI run and
+//! the debiasing experiments shared the cores. Squat ran on every fourth
+//! clip (13) for lack of time, its VAE trained on all 52 at low priority:
+//! 12/13, 130/130 and 127/130.
 //!
 //! ## Session 20 (2026-12-05): jog and sneak, whole classes with 10 IK edits and 10 VAE samples per clip
 //!
