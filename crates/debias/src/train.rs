@@ -49,7 +49,7 @@ pub struct TrainConfig {
     pub weight_decay: f64,
     pub seed: u64,
     /// Share of the pairs (whole clips, at least one when there are two or
-    /// more) held out to pick the best weights and the gain; 0 trains on all
+    /// more) held out to pick the step count and the gain; 0 trains on all
     /// pairs for `iterations` steps and applies the change at full strength.
     pub validation_fraction: f64,
     /// How the corrected clip's foot contacts are kept when applying.
@@ -105,25 +105,24 @@ impl TrainConfig {
 pub struct TrainReport {
     pub pairs: usize,
     pub frames: usize,
+    /// Steps of the final fit: the held-out best when pairs are held out,
+    /// else the configured `iterations`.
     pub iterations: usize,
     /// Mean squared rotation error (standardised units) before training: corrected vs original.
     pub loss_before: f64,
     /// The same after training (training set).
     pub loss_after: f64,
-    /// Pairs held out (not trained on) to choose the weights and the gain.
+    /// Pairs held out of the first fit to choose the step count and the gain.
     #[serde(default)]
     pub validation_pairs: usize,
     /// Held-out mean squared change of rotations (6D, raw units) left by doing
     /// nothing: corrected vs original.
     #[serde(default)]
     pub validation_loss_zero: Option<f64>,
-    /// The same after debiasing (best weights, gain applied): below
+    /// The same after debiasing (best step, gain applied): below
     /// `validation_loss_zero` when the network generalises.
     #[serde(default)]
     pub validation_loss: Option<f64>,
-    /// Step whose weights were kept (the last when nothing is held out).
-    #[serde(default)]
-    pub best_iteration: usize,
     /// Scale of the predicted change when applied, in `[0, 1]`.
     #[serde(default = "full_gain")]
     pub gain: f64,
@@ -249,6 +248,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     };
     let joints = first.joints();
     let fps = first.fps();
+    let sd = state_dim(joints);
     let held_out = held_out(pairs.len(), config.validation_fraction, config.seed);
     let (mut all, mut kept, mut val) = (Rows::default(), Rows::default(), Rows::default());
     for (i, (corrected, original)) in pairs.iter().enumerate() {
@@ -260,7 +260,6 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
             )));
         }
         let (c, o) = aligned(corrected, original)?;
-        let sd = state_dim(joints);
         let x = inputs(&c, sd);
         let (c, o) = (rotations_of(&c, joints), rotations_of(&o, joints));
         let y: Vec<f32> = o.iter().zip(&c).map(|(o, c)| o - c).collect();
@@ -274,24 +273,23 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         all.x.extend(x);
         all.y.extend(y);
     }
-    let (best_iteration, gain, validation) = if held_out.is_empty() {
+    let (steps, gain, validation) = if held_out.is_empty() {
         (config.iterations, 1.0, None)
     } else {
         let (_, best) = fit(&kept, joints, config, config.iterations, Some(&val))?;
         let best = best.ok_or_else(|| DebiasError::Data("no held-out check ran".into()))?;
         (best.iteration, best.gain, Some((best.loss_zero, best.loss)))
     };
-    let (fitted, _) = fit(&all, joints, config, best_iteration, None)?;
+    let (fitted, _) = fit(&all, joints, config, steps, None)?;
     let report = TrainReport {
         pairs: pairs.len(),
         frames: fitted.frames,
-        iterations: best_iteration,
+        iterations: steps,
         loss_before: fitted.loss_before,
         loss_after: fitted.loss_after,
         validation_pairs: held_out.len(),
         validation_loss_zero: validation.map(|v| v.0),
         validation_loss: validation.map(|v| v.1),
-        best_iteration,
         gain,
         wall_s: started.elapsed().as_secs_f64(),
     };
@@ -300,7 +298,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         loss_after = report.loss_after,
         frames = report.frames,
         gain,
-        best_iteration,
+        steps,
         validation_loss_zero = ?report.validation_loss_zero,
         validation_loss = ?report.validation_loss,
         "debias trained"
@@ -364,12 +362,12 @@ fn fit(
     let output = Standardiser::fit(&rows.y, od);
     let x = Tensor::from_vec(input.apply(&rows.x), (frames, id), &Device::Cpu)?;
     let y = Tensor::from_vec(output.apply(&rows.y), (frames, od), &Device::Cpu)?;
-    let x_val = match held_out {
-        Some(v) => Some(Tensor::from_vec(
-            input.apply(&v.x),
-            (v.y.len() / od, id),
-            &Device::Cpu,
-        )?),
+    // Held-out inputs standardised like the training rows, with raw targets.
+    let val = match held_out {
+        Some(v) => {
+            let x = Tensor::from_vec(input.apply(&v.x), (v.y.len() / od, id), &Device::Cpu)?;
+            Some((x, v.y.as_slice()))
+        }
         None => None,
     };
 
@@ -392,9 +390,9 @@ fn fit(
 
     let mut best: Option<Best> = None;
     let check = |it: usize, best: Option<Best>| -> Result<Option<Best>> {
-        match (&x_val, held_out) {
-            (Some(x_val), Some(v)) => Best::keep(best, it, &mlp, x_val, &v.y, &output),
-            _ => Ok(best),
+        match &val {
+            Some((x, y)) => Best::keep(best, it, &mlp, x, y, &output),
+            None => Ok(best),
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -727,7 +725,7 @@ mod tests {
         let zero = report.validation_loss_zero.expect("held out");
         let after = report.validation_loss.expect("held out");
         assert!(after <= zero && after > 0.9 * zero, "{report:?}");
-        assert!(report.best_iteration < 100, "{report:?}");
+        assert!(report.iterations < 100, "{report:?}");
         // Applied, it leaves the clip nearly as corrected.
         let moved = error(&model.apply(&corrected).expect("apply"), &corrected);
         assert!(
@@ -793,22 +791,22 @@ mod tests {
     fn refuses_bad_input() {
         let original = walk();
         assert!(matches!(train(&[], &tiny()), Err(DebiasError::Data(_))));
-        let bad = TrainConfig {
-            iterations: 0,
-            ..tiny()
-        };
-        assert!(matches!(
-            train(&[(original.clone(), original.clone())], &bad),
-            Err(DebiasError::Config(_))
-        ));
-        let bad = TrainConfig {
-            validation_fraction: 1.0,
-            ..tiny()
-        };
-        assert!(matches!(
-            train(&[(original.clone(), original.clone())], &bad),
-            Err(DebiasError::Config(_))
-        ));
+        let bad_configs = [
+            TrainConfig {
+                iterations: 0,
+                ..tiny()
+            },
+            TrainConfig {
+                validation_fraction: 1.0,
+                ..tiny()
+            },
+        ];
+        for bad in &bad_configs {
+            assert!(matches!(
+                train(&[(original.clone(), original.clone())], bad),
+                Err(DebiasError::Config(_))
+            ));
+        }
         let dir = tempfile::tempdir().expect("tempdir");
         assert!(matches!(
             Debiaser::load(dir.path()),

@@ -38,8 +38,8 @@ enum What {
         hidden: Vec<usize>,
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Share of the pairs held out to keep the best weights and scale the
-        /// change (0: train on all, apply at full strength).
+        /// Share of the pairs held out to choose the step count and scale the
+        /// change (0: train on all for --iterations, apply at full strength).
         #[arg(long, default_value_t = TrainConfig::default().validation_fraction)]
         validation_fraction: f64,
         /// Do not put the corrected clip's planted feet back after the network
@@ -164,7 +164,7 @@ fn train(
     if let (Some(zero), Some(after)) = (report.validation_loss_zero, report.validation_loss) {
         eprintln!(
             "held out {} pairs: change left {:.5} -> {:.5} (step {}, gain {:.2})",
-            report.validation_pairs, zero, after, report.best_iteration, report.gain
+            report.validation_pairs, zero, after, report.iterations, report.gain
         );
     }
     Ok(())
