@@ -490,6 +490,10 @@ struct PhysicsArgs {
     /// sliding term at this speed scale, m/s, from then on; 0 = never.
     #[arg(long, default_value_t = PhysicsConfig::default().skate_scale_when_skating_m_s)]
     skate_scale_when_skating: f32,
+    /// Debiased rows keep the debiasing network's output as is: the corrected
+    /// clip's planted feet are not put back (shows what the network alone does).
+    #[arg(long)]
+    debias_no_contacts: bool,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -587,6 +591,7 @@ impl TableArgs {
                 clip_iterations: p.clip_iterations,
                 variant_tracker_iterations: p.variant_tracker_iterations,
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
+                debias_restore_contacts: !p.debias_no_contacts,
             },
         }
     }

@@ -66,10 +66,24 @@ pub struct PhysicsConfig {
     /// it) and are recomputed under the new default.
     #[serde(default)]
     pub skate_scale_when_skating_m_s: f32,
+    /// After the debiasing network, put the corrected clip's planted feet
+    /// back ([`debias::ContactConfig::restore`]); off shows what the network
+    /// alone does to the rows. Left out of the config's JSON when on (the
+    /// default), so tables saved before it existed still resume.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub debias_restore_contacts: bool,
 }
 
 fn is_zero(n: &u64) -> bool {
     *n == 0
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl Default for PhysicsConfig {
@@ -87,6 +101,7 @@ impl Default for PhysicsConfig {
             variant_tracker_iterations: 0,
             skate_scale_when_skating_m_s: correct::CorrectConfig::default()
                 .skate_scale_when_skating_m_s,
+            debias_restore_contacts: true,
         }
     }
 }
@@ -393,9 +408,14 @@ pub fn correct_and_debias(
         skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
         ..pipeline::CorrectStep::default()
     };
+    let defaults = debias::TrainConfig::default();
     let debias = debias::TrainConfig {
         iterations: config.debias_iterations,
-        ..debias::TrainConfig::default()
+        contacts: debias::ContactConfig {
+            restore: config.debias_restore_contacts,
+            ..defaults.contacts
+        },
+        ..defaults
     };
     let plan = pipeline::corrections(
         &original_names,
@@ -549,7 +569,27 @@ fn warm_start_line(originals: &[String], reports: &HashMap<String, correct::Repo
 
 #[cfg(test)]
 mod tests {
-    use super::spread;
+    use super::{PhysicsConfig, spread};
+
+    #[test]
+    fn contact_restoring_is_on_and_absent_from_saved_configs_by_default() {
+        // Saved cells are keyed by the config's JSON: the default must write
+        // what configs written before the knob existed wrote, and read them
+        // back as restoring contacts.
+        let default = PhysicsConfig::default();
+        let json = serde_json::to_value(&default).unwrap();
+        assert!(json.get("debias_restore_contacts").is_none());
+        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert!(back.debias_restore_contacts);
+        let off = PhysicsConfig {
+            debias_restore_contacts: false,
+            ..default
+        };
+        let json = serde_json::to_value(&off).unwrap();
+        assert_eq!(json["debias_restore_contacts"], false);
+        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert!(!back.debias_restore_contacts);
+    }
 
     #[test]
     fn spread_takes_evenly_spaced_items() {
