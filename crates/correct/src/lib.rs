@@ -16,6 +16,37 @@
 //!   reference frames), trained on many clips; every clip's correction starts
 //!   from it (`[correct] policy = "class"`, `bench correction --tracker-clips`).
 //!
+//! ## Session 22 (2026-12-06): deposit's VAE samples from stronger trackers
+//!
+//! Session 21 left deposit's VAE samples at 31 % (99 of 320) behind a class
+//! tracker of 150 PPO iterations that passed 6 of 32 originals as is. The
+//! same VAE command (`vae train ../shared/data/hdm05/*deposit*.amc
+//! --iterations 1500`, 2,994 s on one core; `vae sample --count 320 --seed
+//! 1`), every fifth sample (64) corrected with trackers four and two times
+//! longer: `taskset -c 1 motionaug bench correction --data
+//! ../shared/data/hdm05 --classes deposit --per-class 4 --tracker-clips 100
+//! --tracker-budget 1800 --tracker-iterations 600 --threads 1
+//! --max-iterations 15 --time-budget 300 --variant-tracker-iterations 300
+//! --variants vae/<every fifth>.npz --out bench` (`RAYON_NUM_THREADS=1`; the
+//! other core ran an eval table, then the test suite):
+//!
+//! | | class tracker | originals as is | VAE samples as is (class, second tracker) | VAE accepted | falls | soles fail | residual / m g | s per sample |
+//! |---|---|---|---|---|---|---|---|---|
+//! | session 21 | 150 it, 189 s | 6/32 | 55/640 variants (IK + VAE), 190/585 | 99/320 (31 %) | 186 | 219 | 0.064 | ~12 (class mean) |
+//! | session 22 | 600 it, 1,714 s | 22/32 | 2/64, 18/62 (300 it, 702 s) | **38/64 (59 %)** | 20 | 25 | 0.042 | 16 |
+//!
+//! Of the 26 rejected samples 20 fall (control steps 38-67 at 30 Hz, 1.3-2.2
+//! s in, crouching to the floor), 5 keep their heels up (soles flat in 67-88
+//! % of planted frames, 90 % needed) and one skates 0.023 m/s against its
+//! input's 0.015. Plausibility of the 64:
+//! skating 0.062 -> 0.030 m/s, penetration 1.1 -> 1.2 mm, soles flat 70 ->
+//! 69 %. So the tracker's length is most of deposit's gap (31 -> 59 %, one
+//! sample short of the 60 % target on this subset), and it costs: the two
+//! trackers are 2,416 s for the class (3.6 s per clip over its 672
+//! corrections) and a VAE sample 16 s of fine-tuning on average, so the
+//! class would land near the 15 s per clip limit rather than at session
+//! 21's 12.4 (not run whole: the cores went to the kick eval table).
+//!
 //! ## Session 21 (2026-12-05): grab, deposit and hop as whole classes; squat on a quarter
 //!
 //! Session 20's commands (one class per core, `taskset`, `RAYON_NUM_THREADS=1`),
