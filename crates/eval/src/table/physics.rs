@@ -69,8 +69,9 @@ pub struct PhysicsConfig {
     /// After the debiasing network, put the corrected clip's planted feet
     /// back ([`debias::ContactConfig::restore`]); off shows what the network
     /// alone does to the rows. Left out of the config's JSON when on (the
-    /// default), so tables saved before it existed still resume.
-    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    /// default), so tables saved before it existed still resume (a missing
+    /// field reads as the struct's default, on).
+    #[serde(skip_serializing_if = "is_true")]
     pub debias_restore_contacts: bool,
 }
 
@@ -80,10 +81,6 @@ fn is_zero(n: &u64) -> bool {
 
 fn is_true(b: &bool) -> bool {
     *b
-}
-
-fn yes() -> bool {
-    true
 }
 
 impl Default for PhysicsConfig {
