@@ -6,6 +6,8 @@
 //!
 //! * [`features`]: motion <-> per-frame vectors (root position + 6D rotations),
 //!   reusable by debiasing and evaluation code.
+//! * [`frames`]: the valid frames of a padded batch, so per-frame layers skip
+//!   the padding.
 //! * [`lstm`]: LSTM / BiLSTM with one fused input projection per sequence.
 //! * [`model`]: encoder, decoder, frame and sequence discriminators, built from
 //!   the `nn` crate's seeded parameters, Linear, MLP and LayerNorm.
@@ -21,6 +23,7 @@ pub mod data;
 pub mod error;
 pub mod features;
 pub mod feet;
+pub mod frames;
 pub mod latent;
 pub mod loss;
 pub mod lstm;

@@ -19,6 +19,7 @@
 use candle_core::{D, Tensor};
 
 use crate::error::Result;
+use crate::frames::Frames;
 use crate::lstm_op::Recurrence;
 use nn::Params;
 
@@ -62,15 +63,58 @@ impl Lstm {
     /// recurrence is one op with its own backward pass ([`crate::lstm_op`]).
     pub fn forward(&self, x: &Tensor, mask: &Tensor, dir: Direction) -> Result<Tensor> {
         let (b, t, _) = x.dims3()?;
-        let proj = self.projection(x)?;
-        let mask = match dir {
-            Direction::Forward => None,
-            Direction::Backward => Some(
-                mask.to_dtype(candle_core::DType::F32)?
+        let frames = Frames::all(b, t);
+        self.forward_rows(&frames.pack(x)?, &frames, mask, dir)
+    }
+
+    /// The same from the valid frames' inputs only, `rows` `(valid, I)` of
+    /// the batch `frames` describes: the input projection is computed for
+    /// those; padded steps get a zero projection (their outputs are masked by
+    /// every caller, and the backward direction keeps its state at zero over
+    /// them anyway).
+    pub fn forward_rows(
+        &self,
+        rows: &Tensor,
+        frames: &Frames,
+        mask: &Tensor,
+        dir: Direction,
+    ) -> Result<Tensor> {
+        let proj = frames
+            .unpack(&self.project(rows)?)?
+            .transpose(0, 1)?
+            .contiguous()?;
+        self.recurrence(&proj, Some(mask), dir)
+    }
+
+    /// The same input `x` `(B, I)` at each of `steps` steps, forward (the
+    /// decoder's repeated code): projected once, not once per step.
+    pub fn forward_repeated(&self, x: &Tensor, steps: usize) -> Result<Tensor> {
+        let (b, _) = x.dims2()?;
+        let proj = self
+            .project(x)?
+            .unsqueeze(0)?
+            .broadcast_as((steps, b, 4 * self.hidden))?
+            .contiguous()?;
+        self.recurrence(&proj, None, Direction::Forward)
+    }
+
+    /// `rows` `(N, I)` -> `x W_ih^T + b`, `(N, 4H)`.
+    fn project(&self, rows: &Tensor) -> Result<Tensor> {
+        Ok(rows.matmul(&self.w_ih_t)?.broadcast_add(&self.bias)?)
+    }
+
+    /// The recurrence op on a time-major projection `(T, B, 4H)`; the mask
+    /// is read by the backward direction only. Returns `(B, T, H)`.
+    fn recurrence(&self, proj: &Tensor, mask: Option<&Tensor>, dir: Direction) -> Result<Tensor> {
+        let (t, b, _) = proj.dims3()?;
+        let mask = match (dir, mask) {
+            (Direction::Backward, Some(m)) => Some(
+                m.to_dtype(candle_core::DType::F32)?
                     .t()?
                     .flatten_all()?
                     .to_vec1::<f32>()?,
             ),
+            _ => None,
         };
         let op = Recurrence {
             steps: t,
@@ -86,9 +130,8 @@ impl Lstm {
     /// `x W_ih^T + b` for every frame at once, time-major `(T, B, 4H)`.
     fn projection(&self, x: &Tensor) -> Result<Tensor> {
         let (b, t, i) = x.dims3()?;
-        Ok(x.reshape((b * t, i))?
-            .matmul(&self.w_ih_t)?
-            .broadcast_add(&self.bias)?
+        Ok(self
+            .project(&x.reshape((b * t, i))?)?
             .reshape((b, t, 4 * self.hidden))?
             .transpose(0, 1)?
             .contiguous()?)
@@ -185,9 +228,20 @@ impl BiLstm {
         })
     }
 
+    /// `x` `(B, T, I)`, padded frames skipped by the input projections.
     pub fn forward(&self, x: &Tensor, mask: &Tensor) -> Result<Tensor> {
-        let f = self.fw.forward(x, mask, Direction::Forward)?;
-        let b = self.bw.forward(x, mask, Direction::Backward)?;
+        let frames = Frames::new(mask)?;
+        self.forward_rows(&frames.pack(x)?, &frames, mask)
+    }
+
+    /// From the valid frames' inputs `(valid, I)` (see [`Lstm::forward_rows`]).
+    pub fn forward_rows(&self, rows: &Tensor, frames: &Frames, mask: &Tensor) -> Result<Tensor> {
+        let f = self
+            .fw
+            .forward_rows(rows, frames, mask, Direction::Forward)?;
+        let b = self
+            .bw
+            .forward_rows(rows, frames, mask, Direction::Backward)?;
         Ok(Tensor::cat(&[f, b], D::Minus1)?)
     }
 }

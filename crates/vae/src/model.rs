@@ -14,7 +14,8 @@ use candle_core::{D, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
-use crate::lstm::{BiLstm, Direction, Lstm, masked_mean};
+use crate::frames::Frames;
+use crate::lstm::{BiLstm, Lstm, masked_mean};
 use nn::{LayerNorm, Linear, Mlp, MlpConfig, Params};
 
 /// Layer sizes. [`VaeConfig::reference`] is the paper's; the default is small enough
@@ -126,10 +127,13 @@ pub struct Encoder {
 }
 
 impl Encoder {
-    /// `(mu, logvar)`, each `(B, latent)`.
+    /// `(mu, logvar)`, each `(B, latent)`. The per-frame layers see the valid
+    /// frames only ([`Frames`]).
     pub fn forward(&self, x: &Tensor, mask: &Tensor) -> Result<(Tensor, Tensor)> {
-        let h = self.input.forward(&self.norm.forward(x)?)?.relu()?;
-        let h = self.lstm.forward(&h, mask)?;
+        let frames = Frames::new(mask)?;
+        let rows = self.norm.forward(&frames.pack(x)?)?;
+        let rows = self.input.forward(&rows)?.relu()?;
+        let h = self.lstm.forward_rows(&rows, &frames, mask)?;
         let pooled = masked_mean(&h, mask)?;
         Ok((self.mu.forward(&pooled)?, self.logvar.forward(&pooled)?))
     }
@@ -146,15 +150,21 @@ impl Decoder {
     /// depend on the total length, so one batch can decode several lengths.
     pub fn forward(&self, z: &Tensor, frames: usize) -> Result<Tensor> {
         let (b, _) = z.dims2()?;
-        let step = self.input.forward(z)?;
-        let width = step.dim(1)?;
-        let seq = step
-            .unsqueeze(1)?
-            .broadcast_as((b, frames, width))?
-            .contiguous()?;
-        let mask = Tensor::ones((b, frames), z.dtype(), z.device())?;
-        let h = self.lstm.forward(&seq, &mask, Direction::Forward)?;
-        Ok(self.out.forward(&h)?)
+        self.decode(z, &Frames::all(b, frames))
+    }
+
+    /// The same for training: only the frames `mask` `(B, T)` marks valid are
+    /// put through the output MLP; the padding decodes to zeros.
+    pub fn forward_masked(&self, z: &Tensor, mask: &Tensor) -> Result<Tensor> {
+        self.decode(z, &Frames::new(mask)?)
+    }
+
+    fn decode(&self, z: &Tensor, frames: &Frames) -> Result<Tensor> {
+        // The code, repeated over time, is the LSTM's input at every step.
+        let h = self
+            .lstm
+            .forward_repeated(&self.input.forward(z)?, frames.steps())?;
+        frames.unpack(&self.out.forward(&frames.pack(&h)?)?)
     }
 }
 
@@ -163,9 +173,17 @@ pub struct FrameDiscriminator {
 }
 
 impl FrameDiscriminator {
-    /// One score per frame, `(B, T)`.
-    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        Ok(self.mlp.forward(x)?.squeeze(D::Minus1)?)
+    /// One score per frame, `(B, T)`; with a mask, valid frames only are
+    /// scored (the padding gets 0).
+    pub fn forward(&self, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+        let scores = match mask {
+            None => self.mlp.forward(x)?,
+            Some(m) => {
+                let frames = Frames::new(m)?;
+                frames.unpack(&self.mlp.forward(&frames.pack(x)?)?)?
+            }
+        };
+        Ok(scores.squeeze(D::Minus1)?)
     }
 }
 

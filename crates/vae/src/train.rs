@@ -397,7 +397,12 @@ impl Trainer {
             Some(m) => Tensor::cat(&[&z, &m.codes], 0)?,
             None => z,
         };
-        let decoded = vae.decoder.forward(&z_all, frames)?;
+        let decoded = match &mixed {
+            Some(m) => vae
+                .decoder
+                .forward_masked(&z_all, &Tensor::cat(&[&batch.mask, &m.mask], 0)?)?,
+            None => vae.decoder.forward_masked(&z_all, &batch.mask)?,
+        };
         let raw_all = self.denorm.apply(&decoded)?;
         let xhat = decoded.narrow(0, 0, b)?;
         let raw_hat = raw_all.narrow(0, 0, b)?;
@@ -445,8 +450,11 @@ impl Trainer {
         let mut adv = 0.0;
         let mut adv_mixed = 0.0;
         if self.config.adversarial {
-            let g = (loss::hinge_generator(&vae.frame_disc.forward(&xhat)?, Some(&batch.mask))?
-                + loss::hinge_generator(&vae.seq_disc.forward(&xhat, &batch.mask)?, None)?)?;
+            let g =
+                (loss::hinge_generator(
+                    &vae.frame_disc.forward(&xhat, Some(&batch.mask))?,
+                    Some(&batch.mask),
+                )? + loss::hinge_generator(&vae.seq_disc.forward(&xhat, &batch.mask)?, None)?)?;
             adv = g.to_scalar::<f32>()?;
             total = (total + (g * w.adversarial)?)?;
         }
@@ -455,7 +463,7 @@ impl Trainer {
             _ => None,
         };
         if let Some((xm, mm)) = &x_mixed {
-            let g = (loss::hinge_generator(&vae.frame_disc.forward(xm)?, Some(mm))?
+            let g = (loss::hinge_generator(&vae.frame_disc.forward(xm, Some(mm))?, Some(mm))?
                 + loss::hinge_generator(&vae.seq_disc.forward(xm, mm)?, None)?)?;
             adv_mixed = g.to_scalar::<f32>()?;
             total = (total + (g * w.mixed_adversarial)?)?;
@@ -479,7 +487,7 @@ impl Trainer {
                     Tensor::cat(&[m, m], 0)?,
                 ),
             };
-            let frame = vae.frame_disc.forward(&all)?;
+            let frame = vae.frame_disc.forward(&all, Some(&masks))?;
             let seq = vae.seq_disc.forward(&all, &masks)?;
             let mut d = (loss::hinge_discriminator(
                 &frame.narrow(0, 0, b)?,

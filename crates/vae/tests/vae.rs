@@ -69,7 +69,7 @@ fn network_shapes() {
     assert_eq!(mu.dims(), &[4, cfg.latent]);
     assert_eq!(lv.dims(), &[4, cfg.latent]);
     assert_eq!(vae.decoder.forward(&mu, 9).unwrap().dims(), &[4, 9, f]);
-    assert_eq!(vae.frame_disc.forward(&x).unwrap().dims(), &[4, 7]);
+    assert_eq!(vae.frame_disc.forward(&x, None).unwrap().dims(), &[4, 7]);
     assert_eq!(vae.seq_disc.forward(&x, &mask).unwrap().dims(), &[4]);
 }
 
