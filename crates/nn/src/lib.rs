@@ -6,7 +6,9 @@
 //! * [`params`]: the named, seeded parameter store and the one initialisation
 //!   scheme (candle's CPU random ops cannot be seeded); it also backs a candle-nn
 //!   `VarBuilder` for modules built with `candle_nn::linear` and friends.
-//! * [`linear`], [`mlp`], [`layer_norm`]: the feed-forward layers.
+//! * [`linear`], [`mlp`], [`layer_norm`]: the feed-forward layers; [`bias`]:
+//!   the row-wise bias add they use, with a backward pass that sums rows in
+//!   contiguous memory.
 //! * [`optim`]: SGD with a halving schedule and Adam(W), whose state can be saved
 //!   and restored bit for bit, and the one gradient-norm clipping function.
 //! * [`kl`]: the diagonal Gaussian latent: KL to N(0, I), reparameterisation,
@@ -16,6 +18,7 @@
 //!
 //! Everything is f32 on the CPU.
 
+pub mod bias;
 pub mod error;
 pub mod kl;
 pub mod layer_norm;
@@ -25,6 +28,7 @@ pub mod optim;
 pub mod params;
 pub mod threads;
 
+pub use bias::add_bias;
 pub use error::{NnError, Result};
 pub use kl::{kl_mean, kl_sum, normal, reparameterise};
 pub use layer_norm::LayerNorm;

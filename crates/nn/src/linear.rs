@@ -7,6 +7,7 @@
 use candle_core::Tensor;
 use candle_nn::VarBuilder;
 
+use crate::bias::add_bias;
 use crate::error::Result;
 use crate::params::Params;
 
@@ -61,7 +62,7 @@ impl Linear {
         let rows = x.elem_count() / fan_in.max(1);
         let y = x.reshape((rows, fan_in))?.matmul(&self.w_t)?;
         let y = match &self.b {
-            Some(b) => y.broadcast_add(b)?,
+            Some(b) => add_bias(&y, b)?,
             None => y,
         };
         if let Some(last) = dims.last_mut() {

@@ -100,7 +100,7 @@ impl Lstm {
 
     /// `rows` `(N, I)` -> `x W_ih^T + b`, `(N, 4H)`.
     fn project(&self, rows: &Tensor) -> Result<Tensor> {
-        Ok(rows.matmul(&self.w_ih_t)?.broadcast_add(&self.bias)?)
+        Ok(nn::add_bias(&rows.matmul(&self.w_ih_t)?, &self.bias)?)
     }
 
     /// The recurrence op on a time-major projection `(T, B, 4H)`; the mask
