@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, VaeError};
 use crate::loss::{check_weights, masked_frame_mean, six_d_matrices};
+use crate::mat3;
 
 /// Weights and thresholds of the foot terms (all 0: the plain VAE loss).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -94,27 +95,26 @@ struct ChainJoint {
     joint: usize,
     /// Index into the chain of the parent, `None` for the root.
     parent: Option<usize>,
-    /// Offset from the parent in the parent's frame, metres, `(1, 1, 3)`.
-    offset: Tensor,
+    /// Offset from the parent in the parent's frame, metres.
+    offset: [f32; 3],
 }
 
 /// Forward kinematics of the foot points of one skeleton.
 pub struct FootKinematics {
     joints: usize,
     chain: Vec<ChainJoint>,
-    /// Chain index and end-site offset `(1, 1, 3)` (`None`: the joint's own
+    /// Chain index and end-site offset (`None`: the joint's own
     /// position).
-    points: Vec<(usize, Option<Tensor>)>,
+    points: Vec<(usize, Option<[f32; 3]>)>,
     /// Columns of the chain joints' 6D rotations in a raw frame, chain order
     /// (`u32`): one `index_select` instead of a slice per joint of all 31,
     /// whose backward passes each padded their gradient to the whole frame.
     columns: Tensor,
 }
 
-/// A constant offset as a `(1, 1, 3)` row vector, built once per skeleton.
-fn row(v: motion::glam::DVec3) -> Result<Tensor> {
-    let v = [v.x as f32, v.y as f32, v.z as f32];
-    Ok(Tensor::from_slice(&v, (1, 1, 3), &Device::Cpu)?)
+/// A constant offset as a row vector.
+fn row(v: motion::glam::DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
 }
 
 impl FootKinematics {
@@ -139,13 +139,10 @@ impl FootKinematics {
             chain.push(ChainJoint {
                 joint: j,
                 parent: skeleton.parent(j).map(|p| index[p]),
-                offset: row(skeleton.joint(j).offset)?,
+                offset: row(skeleton.joint(j).offset),
             });
         }
-        let points = feet
-            .iter()
-            .map(|&(j, e)| Ok((index[j], e.map(row).transpose()?)))
-            .collect::<Result<_>>()?;
+        let points = feet.iter().map(|&(j, e)| (index[j], e.map(row))).collect();
         let columns: Vec<u32> = chain
             .iter()
             .flat_map(|c| (0..6).map(move |k| (3 + 6 * c.joint + k) as u32))
@@ -169,7 +166,7 @@ impl FootKinematics {
                 joint: j,
                 // Joints are in topological order: the parent's index is its own.
                 parent: skeleton.parent(j),
-                offset: row(skeleton.joint(j).offset)?,
+                offset: row(skeleton.joint(j).offset),
             });
         }
         let columns: Vec<u32> = (0..6 * skeleton.len()).map(|k| (3 + k) as u32).collect();
@@ -213,8 +210,8 @@ impl FootKinematics {
                     position.push(root.clone());
                 }
                 Some(p) => {
-                    position.push((&position[p] + c.offset.broadcast_matmul(&global[p])?)?);
-                    global.push(m.matmul(&global[p])?);
+                    position.push((&position[p] + mat3::row_times(c.offset, &global[p])?)?);
+                    global.push(mat3::mul(&m, &global[p])?);
                 }
             }
         }
@@ -222,7 +219,7 @@ impl FootKinematics {
         for (c, site) in &self.points {
             out.push(match site {
                 None => position[*c].clone(),
-                Some(e) => (&position[*c] + e.broadcast_matmul(&global[*c])?)?,
+                Some(e) => (&position[*c] + mat3::row_times(*e, &global[*c])?)?,
             });
         }
         Ok(Tensor::cat(&out, 1)?.reshape((b, t, self.points.len(), 3))?)

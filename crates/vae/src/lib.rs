@@ -28,6 +28,7 @@ pub mod latent;
 pub mod loss;
 pub mod lstm;
 mod lstm_op;
+mod mat3;
 pub mod model;
 pub mod normalize;
 pub mod train;
