@@ -11,17 +11,10 @@
 
 use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
 
+use crate::cpu_op::f32_slice;
 use crate::error::{NnError, Result};
 
 struct AddBias;
-
-fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> candle_core::Result<&'a [f32]> {
-    let data = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&data[a..b]),
-        None => candle_core::bail!("add-bias: {what} must be contiguous"),
-    }
-}
 
 impl CustomOp2 for AddBias {
     fn name(&self) -> &'static str {
@@ -35,8 +28,8 @@ impl CustomOp2 for AddBias {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let y = contiguous(s1, l1, "the input")?;
-        let b = contiguous(s2, l2, "the bias")?;
+        let y = f32_slice(s1, l1, "add-bias", "the input")?;
+        let b = f32_slice(s2, l2, "add-bias", "the bias")?;
         let c = b.len();
         if c == 0 || y.len() % c != 0 {
             candle_core::bail!("add-bias: {} values are not rows of {c}", y.len());
@@ -88,6 +81,10 @@ mod tests {
     use super::*;
     use candle_core::{Device, Var};
 
+    fn values(t: &Tensor) -> Vec<f32> {
+        t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    }
+
     #[test]
     fn matches_broadcast_add_forward_and_backward() {
         let dev = Device::Cpu;
@@ -96,33 +93,11 @@ mod tests {
         let w = Tensor::new(&[[1f32, 2., 3.], [-1., 0.5, 4.]], &dev).unwrap();
         let ours = add_bias(y.as_tensor(), b.as_tensor()).unwrap();
         let theirs = y.as_tensor().broadcast_add(b.as_tensor()).unwrap();
-        assert_eq!(
-            ours.to_vec2::<f32>().unwrap(),
-            theirs.to_vec2::<f32>().unwrap()
-        );
-        let g1 = (ours * &w).unwrap().sum_all().unwrap().backward().unwrap();
-        let g2 = (theirs * &w)
-            .unwrap()
-            .sum_all()
-            .unwrap()
-            .backward()
-            .unwrap();
+        assert_eq!(values(&ours), values(&theirs));
+        let grads = |out: Tensor| (out * &w).unwrap().sum_all().unwrap().backward().unwrap();
+        let (g1, g2) = (grads(ours), grads(theirs));
         for v in [y.as_tensor(), b.as_tensor()] {
-            let a = g1
-                .get(v)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap();
-            let e = g2
-                .get(v)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap();
-            assert_eq!(a, e);
+            assert_eq!(values(g1.get(v).unwrap()), values(g2.get(v).unwrap()));
         }
     }
 

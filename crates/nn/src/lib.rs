@@ -8,7 +8,7 @@
 //!   `VarBuilder` for modules built with `candle_nn::linear` and friends.
 //! * [`linear`], [`mlp`], [`layer_norm`]: the feed-forward layers; [`bias`]:
 //!   the row-wise bias add they use, with a backward pass that sums rows in
-//!   contiguous memory.
+//!   contiguous memory; [`cpu_op`]: what hand-written candle ops share.
 //! * [`optim`]: SGD with a halving schedule and Adam(W), whose state can be saved
 //!   and restored bit for bit, and the one gradient-norm clipping function.
 //! * [`kl`]: the diagonal Gaussian latent: KL to N(0, I), reparameterisation,
@@ -19,6 +19,7 @@
 //! Everything is f32 on the CPU.
 
 pub mod bias;
+pub mod cpu_op;
 pub mod error;
 pub mod kl;
 pub mod layer_norm;

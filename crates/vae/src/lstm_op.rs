@@ -64,14 +64,6 @@ fn matmul(a: &[f32], m: usize, k: usize, b: &Tensor) -> candle_core::Result<Vec<
         .to_vec1::<f32>()
 }
 
-fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> candle_core::Result<&'a [f32]> {
-    let data = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&data[a..b]),
-        None => candle_core::bail!("lstm recurrence: {what} must be contiguous"),
-    }
-}
-
 impl Recurrence {
     fn order(&self) -> Vec<usize> {
         if self.reverse {
@@ -162,8 +154,8 @@ impl CustomOp2 for Recurrence {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let proj = contiguous(s1, l1, "the projection")?;
-        let w = contiguous(s2, l2, "W_hh")?;
+        let proj = nn::cpu_op::f32_slice(s1, l1, "lstm recurrence", "the projection")?;
+        let w = nn::cpu_op::f32_slice(s2, l2, "lstm recurrence", "W_hh")?;
         self.check(proj.len(), w.len())?;
         let w_t = Tensor::from_slice(w, (4 * self.hidden, self.hidden), &Device::Cpu)?.t()?;
         let (tr, out) = self.trace(proj, &w_t)?;

@@ -13,14 +13,6 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Shape, Tensor};
 
 use crate::error::{Result, VaeError};
 
-fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> candle_core::Result<&'a [f32]> {
-    let data = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&data[a..b]),
-        None => candle_core::bail!("mat3: {what} must be contiguous"),
-    }
-}
-
 /// `out_i = a_i b_i` for 3x3 blocks; with `ta`/`tb` the blocks of `a`/`b`
 /// are read transposed.
 fn products(a: &[f32], b: &[f32], ta: bool, tb: bool) -> Vec<f32> {
@@ -59,8 +51,8 @@ impl CustomOp2 for Mul {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let a = contiguous(s1, l1, "the left matrices")?;
-        let b = contiguous(s2, l2, "the right matrices")?;
+        let a = nn::cpu_op::f32_slice(s1, l1, "mat3", "the left matrices")?;
+        let b = nn::cpu_op::f32_slice(s2, l2, "mat3", "the right matrices")?;
         Ok((
             CpuStorage::F32(products(a, b, false, false)),
             l1.shape().clone(),
@@ -110,7 +102,7 @@ impl CustomOp1 for RowTimes {
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let m = contiguous(s, l, "the matrices")?;
+        let m = nn::cpu_op::f32_slice(s, l, "mat3", "the matrices")?;
         let v = self.0;
         let n = m.len() / 9;
         let mut out = Vec::with_capacity(3 * n);
@@ -162,24 +154,21 @@ mod tests {
         }
     }
 
+    /// Gradients of `sum(out * w)`.
+    fn grads(out: Tensor, w: &Tensor) -> candle_core::backprop::GradStore {
+        (out * w).unwrap().sum_all().unwrap().backward().unwrap()
+    }
+
     #[test]
     fn products_and_gradients_match_candles_batched_matmul() {
         let p = Params::new(3);
-        let a = p.uniform("a", &[5, 3, 3], 1.0).unwrap();
-        let b = p.uniform("b", &[5, 3, 3], 1.0).unwrap();
+        let a = Var::from_tensor(&p.uniform("a", &[5, 3, 3], 1.0).unwrap()).unwrap();
+        let b = Var::from_tensor(&p.uniform("b", &[5, 3, 3], 1.0).unwrap()).unwrap();
         let w = p.uniform("w", &[5, 3, 3], 1.0).unwrap().detach();
-        let a = Var::from_tensor(&a).unwrap();
-        let b = Var::from_tensor(&b).unwrap();
         let ours = mul(a.as_tensor(), b.as_tensor()).unwrap();
         let theirs = a.as_tensor().matmul(b.as_tensor()).unwrap();
         close(&ours, &theirs);
-        let g1 = (ours * &w).unwrap().sum_all().unwrap().backward().unwrap();
-        let g2 = (theirs * &w)
-            .unwrap()
-            .sum_all()
-            .unwrap()
-            .backward()
-            .unwrap();
+        let (g1, g2) = (grads(ours, &w), grads(theirs, &w));
         for v in [a.as_tensor(), b.as_tensor()] {
             close(g1.get(v).unwrap(), g2.get(v).unwrap());
         }
@@ -196,13 +185,7 @@ mod tests {
         let theirs = row.broadcast_matmul(m.as_tensor()).unwrap();
         assert_eq!(ours.dims(), &[4, 1, 3]);
         close(&ours, &theirs);
-        let g1 = (ours * &w).unwrap().sum_all().unwrap().backward().unwrap();
-        let g2 = (theirs * &w)
-            .unwrap()
-            .sum_all()
-            .unwrap()
-            .backward()
-            .unwrap();
+        let (g1, g2) = (grads(ours, &w), grads(theirs, &w));
         close(
             g1.get(m.as_tensor()).unwrap(),
             g2.get(m.as_tensor()).unwrap(),
