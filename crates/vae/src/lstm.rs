@@ -62,9 +62,7 @@ impl Lstm {
     /// Returns `(B, T, H)`, outputs in time order for both directions. The
     /// recurrence is one op with its own backward pass ([`crate::lstm_op`]).
     pub fn forward(&self, x: &Tensor, mask: &Tensor, dir: Direction) -> Result<Tensor> {
-        let (b, t, _) = x.dims3()?;
-        let frames = Frames::all(b, t);
-        self.forward_rows(&frames.pack(x)?, &frames, mask, dir)
+        self.recurrence(&self.projection(x)?, Some(mask), dir)
     }
 
     /// The same from the valid frames' inputs only, `rows` `(valid, I)` of
