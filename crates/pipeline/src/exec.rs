@@ -173,6 +173,9 @@ pub struct Context<'a> {
     /// Changes to every correction's settings beyond the recipe's (the
     /// evaluation table bounds corrections by samples on one thread).
     pub tune_correction: Option<&'a (dyn Fn(&mut correct::CorrectConfig) + Sync)>,
+    /// Rollout threads of the job's PPO, over the recipe's and the tweaks':
+    /// the runner gives corrections that run side by side one thread each.
+    pub rollout_threads: Option<usize>,
     /// Each PPO iteration of a correction.
     pub on_progress: &'a (dyn Fn(&correct::job::ProgressEvent) + Sync),
     /// Each finished correction (a reused one too), accepted or not: its
@@ -191,6 +194,7 @@ impl<'a> Context<'a> {
             checkpoint_every_s: None,
             stop: None,
             tune_correction: None,
+            rollout_threads: None,
             on_progress: &|_| {},
             on_corrected: &|_| {},
         }
@@ -205,6 +209,9 @@ impl<'a> Context<'a> {
         config.stop = self.stop.clone();
         if let Some(tune) = self.tune_correction {
             tune(config);
+        }
+        if let Some(threads) = self.rollout_threads {
+            config.ppo.threads = threads;
         }
     }
 

@@ -1,9 +1,11 @@
 //! The whole augmentation in one process: walk the plan in order, run each
 //! job with the one executor ([`crate::exec`]) over inputs kept in memory,
-//! and write each output once its last job is done. Expensive work survives
-//! a crash: every correction lives in `work/correct/<clip>/` (checkpoints,
-//! then the finished clip and report), and a rerun with the same recipe and
-//! inputs reuses or resumes it.
+//! and write each output once its last job is done. A stretch of jobs that
+//! need nothing from each other runs side by side (synthesis; corrections
+//! with [`Tune::parallel_corrections`]), their results kept in plan order.
+//! Expensive work survives a crash: every correction lives in
+//! `work/correct/<clip>/` (checkpoints, then the finished clip and report),
+//! and a rerun with the same recipe and inputs reuses or resumes it.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -141,6 +143,11 @@ pub struct Tune<'a> {
     /// `correct` (the table keeps them in `samples`, where its earlier runs
     /// left them to be resumed).
     pub corrections_folder: Option<&'a str>,
+    /// Corrections (of originals and of made clips) that need nothing from
+    /// each other run this many at a time, each on its own thread; 0 or 1:
+    /// one after the other. Their results do not change: every correction
+    /// has its own seed and files.
+    pub parallel_corrections: usize,
 }
 
 impl Tune<'_> {
@@ -213,13 +220,9 @@ impl<'a> State<'a> {
     fn run_plan(&mut self, plan: &Plan) -> Result<(), PipelineError> {
         let mut i = 0;
         while i < plan.jobs.len() {
-            // Synthesis jobs are cheap and independent: run a whole run of them in parallel.
-            let mut j = i;
-            while j < plan.jobs.len() && matches!(plan.jobs[j].kind, JobKind::Synthesize { .. }) {
-                j += 1;
-            }
+            let j = self.batch_end(&plan.jobs, i);
             if j > i {
-                self.synthesize_batch(&plan.jobs[i..j])?;
+                self.run_batch(&plan.jobs[i..j])?;
                 i = j;
                 continue;
             }
@@ -227,6 +230,40 @@ impl<'a> State<'a> {
             i += 1;
         }
         Ok(())
+    }
+
+    /// How many jobs of this kind run side by side: synthesis jobs are cheap
+    /// and independent (`None`: rayon's pool), corrections take
+    /// [`Tune::parallel_corrections`] threads; 1 = one after the other.
+    fn batch_threads(&self, kind: &JobKind) -> Option<Option<usize>> {
+        match kind {
+            JobKind::Synthesize { .. } => Some(None),
+            JobKind::CorrectOriginal { .. } | JobKind::Correct { .. }
+                if self.tune.parallel_corrections > 1 =>
+            {
+                Some(Some(self.tune.parallel_corrections))
+            }
+            _ => None,
+        }
+    }
+
+    /// The end of the batch starting at `jobs[start]` (`start` when that job
+    /// runs alone): the following jobs that run side by side with the same
+    /// threads and need nothing the batch makes.
+    fn batch_end(&self, jobs: &[PlannedJob], start: usize) -> usize {
+        let Some(threads) = self.batch_threads(&jobs[start].kind) else {
+            return start;
+        };
+        let mut keys: HashSet<&str> = HashSet::new();
+        let mut end = start;
+        while end < jobs.len()
+            && self.batch_threads(&jobs[end].kind) == Some(threads)
+            && !jobs[end].deps.iter().any(|d| keys.contains(d.as_str()))
+        {
+            keys.insert(jobs[end].key.as_str());
+            end += 1;
+        }
+        end
     }
 
     fn skip_if_inputs_failed(&mut self, job: &PlannedJob) -> bool {
@@ -243,23 +280,42 @@ impl<'a> State<'a> {
         self.summary.failures.push((job.key.clone(), reason));
     }
 
-    fn synthesize_batch(&mut self, jobs: &[PlannedJob]) -> Result<(), PipelineError> {
+    /// Runs independent jobs side by side (see [`Self::batch_threads`]), then
+    /// keeps what they made in plan order, so the run's memory and outputs
+    /// are those of running them one after the other.
+    fn run_batch(&mut self, jobs: &[PlannedJob]) -> Result<(), PipelineError> {
+        let runnable: Vec<&PlannedJob> = jobs
+            .iter()
+            .filter(|job| !self.skip_if_inputs_failed(job))
+            .collect();
+        let Some(first) = runnable.first() else {
+            return Ok(());
+        };
+        let threads = self.batch_threads(&first.kind).flatten();
         let on_event = self.options.on_event;
         let state = &*self;
-        let results: Vec<(Vec<Made>, Result<(), PipelineError>)> = jobs
-            .par_iter()
-            .map(|job| {
-                on_event(Event::JobStarted { job });
-                let (made, r) = state.execute(job);
-                on_event(Event::JobFinished { job, ok: r.is_ok() });
-                (made, r)
-            })
-            .collect();
-        for (job, (made, result)) in jobs.iter().zip(results) {
-            self.keep(job, made)?;
-            if let Err(e) = result {
-                self.fail(job, e.to_string());
-            }
+        let run_all = || -> Vec<(Vec<Made>, Result<(), PipelineError>)> {
+            runnable
+                .par_iter()
+                .map(|job| {
+                    on_event(Event::JobStarted { job });
+                    let (made, r) = state.execute(job, threads.map(|_| 1));
+                    on_event(Event::JobFinished { job, ok: r.is_ok() });
+                    (made, r)
+                })
+                .collect()
+        };
+        let results = match threads {
+            None => run_all(),
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .thread_name(|i| format!("correct-{i}"))
+                .build()
+                .map_err(|e| PipelineError::Job(format!("cannot start {n} threads: {e}")))?
+                .install(run_all),
+        };
+        for (job, (made, result)) in runnable.into_iter().zip(results) {
+            self.settle(job, made, result)?;
         }
         Ok(())
     }
@@ -269,20 +325,42 @@ impl<'a> State<'a> {
             return Ok(());
         }
         (self.options.on_event)(Event::JobStarted { job });
-        let (made, result) = self.execute(job);
+        let (made, result) = self.execute(job, None);
         let ok = result.is_ok();
-        match result {
-            Ok(()) => self.keep(job, made)?,
-            // A broken output directory is fatal; a job's own failure is not.
-            Err(e @ PipelineError::Io { .. }) => return Err(e),
-            Err(e) => self.fail(job, e.to_string()),
-        }
+        self.settle(job, made, result)?;
         (self.options.on_event)(Event::JobFinished { job, ok });
         Ok(())
     }
 
-    /// Runs one job with the executor; what it made, and how it ended.
-    fn execute(&self, job: &PlannedJob) -> (Vec<Made>, Result<(), PipelineError>) {
+    /// Keeps what a job made and records how it ended. A broken output
+    /// directory is fatal; a job's own failure is not (a synthesis job keeps
+    /// the outputs it did make).
+    fn settle(
+        &mut self,
+        job: &PlannedJob,
+        made: Vec<Made>,
+        result: Result<(), PipelineError>,
+    ) -> Result<(), PipelineError> {
+        match result {
+            Ok(()) => self.keep(job, made),
+            Err(e @ PipelineError::Io { .. }) => Err(e),
+            Err(e) => {
+                if matches!(job.kind, JobKind::Synthesize { .. }) {
+                    self.keep(job, made)?;
+                }
+                self.fail(job, e.to_string());
+                Ok(())
+            }
+        }
+    }
+
+    /// Runs one job with the executor (its PPO on `rollout_threads` threads,
+    /// when given); what it made, and how it ended.
+    fn execute(
+        &self,
+        job: &PlannedJob,
+        rollout_threads: Option<usize>,
+    ) -> (Vec<Made>, Result<(), PipelineError>) {
         let work = self.options.work;
         let dir = self
             .tune
@@ -310,6 +388,7 @@ impl<'a> State<'a> {
             on_progress: &on_progress,
             on_corrected: &on_corrected,
             tune_correction: self.tune.correction,
+            rollout_threads,
             ..Context::in_dir(&dir)
         };
         let mut made = Vec::new();

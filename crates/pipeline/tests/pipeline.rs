@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use pipeline::{Clip, Event, JobKind, Options, Recipe, plan, run};
+use pipeline::{Clip, CorrectStep, Event, JobKind, Options, PolicyKind, Recipe, plan, run};
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/data")).join(name)
@@ -795,5 +795,105 @@ fn plan_size_counts_what_plan_makes() {
                 "{text} over {clips} clips"
             );
         }
+    }
+}
+
+/// Every correction of a [`pipeline::corrections`] plan (each clip made
+/// three times under other names, one PPO iteration each) with `parallel`
+/// corrections at a time: clip -> (R_norm, iterations, tracked clip).
+fn corrections_side_by_side(parallel: usize) -> Vec<(String, f64, u64, motion::Motion)> {
+    let original = kick();
+    let step = CorrectStep {
+        time_budget_s: 600.0,
+        max_iterations: Some(1),
+        target_r_norm: 2.0,
+        // Never accepted as is, so every clip trains its iteration.
+        accept_threshold: 1.0,
+        keep_rejected: true,
+        envs: 2,
+        policy: PolicyKind::Class,
+        tracker_budget_s: 600.0,
+        tracker_iterations: Some(1),
+        ..CorrectStep::default()
+    };
+    let made: Vec<String> = (0..3).map(|i| format!("copy_{i}")).collect();
+    let plan = pipeline::corrections(
+        std::slice::from_ref(&original.name),
+        &made,
+        &step,
+        None,
+        |name| name.bytes().map(u64::from).sum(),
+    );
+    let seen = std::sync::Mutex::new(Vec::new());
+    let on_event = |e: pipeline::Event<'_>| {
+        if let pipeline::Event::Corrected {
+            job,
+            report,
+            motion,
+        } = e
+        {
+            seen.lock().expect("lock").push((
+                job.key.clone(),
+                report.r_norm,
+                report.iterations,
+                motion.clone(),
+            ));
+        }
+    };
+    // One rollout thread, as the evaluation table runs them: the runner
+    // gives corrections side by side one thread each.
+    let small = |c: &mut correct::CorrectConfig| {
+        c.ppo.threads = 1;
+        c.ppo.samples_per_iteration = 256;
+        c.ppo.minibatch_size = 128;
+        c.ppo.epochs = 1;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let given = made
+        .iter()
+        .map(|n| pipeline::WorkClip::given(n, original.motion.clone()))
+        .collect();
+    pipeline::run_plan(
+        &plan,
+        std::slice::from_ref(&original),
+        given,
+        &Options {
+            on_event: &on_event,
+            ..in_process(dir.path())
+        },
+        pipeline::Tune {
+            correction: Some(&small),
+            parallel_corrections: parallel,
+            ..pipeline::Tune::default()
+        },
+    )
+    .expect("run");
+    let mut seen = seen.into_inner().expect("lock");
+    seen.sort_by(|a, b| a.0.cmp(&b.0));
+    seen
+}
+
+#[test]
+fn corrections_side_by_side_give_what_they_give_one_after_the_other() {
+    let one = corrections_side_by_side(1);
+    let two = corrections_side_by_side(2);
+    let keys: Vec<&str> = one.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(
+        keys,
+        [
+            "correct:copy_0",
+            "correct:copy_1",
+            "correct:copy_2",
+            "correct_original:HDM_bd_kickLFront1Reps_001_120"
+        ],
+        "every clip corrected once"
+    );
+    let numbers = |run: &[(String, f64, u64, motion::Motion)]| -> Vec<(String, f64, u64)> {
+        run.iter().map(|c| (c.0.clone(), c.1, c.2)).collect()
+    };
+    assert_eq!(numbers(&one), numbers(&two));
+    assert!(one.iter().all(|c| c.2 == 1), "{:?}", numbers(&one));
+    for (a, b) in one.iter().zip(&two) {
+        assert!(a.3 == b.3, "{}: the tracked clips differ", a.0);
     }
 }

@@ -494,6 +494,11 @@ struct PhysicsArgs {
     /// clip's planted feet are not put back (shows what the network alone does).
     #[arg(long)]
     debias_no_contacts: bool,
+    /// Corrections that need nothing from each other run this many at a time
+    /// (e.g. the cores to spare; the class trackers still train on one). The
+    /// numbers do not depend on it.
+    #[arg(long, default_value_t = PhysicsConfig::default().threads)]
+    correct_threads: usize,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -592,6 +597,7 @@ impl TableArgs {
                 variant_tracker_iterations: p.variant_tracker_iterations,
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
                 debias_restore_contacts: !p.debias_no_contacts,
+                threads: p.correct_threads,
             },
         }
     }
