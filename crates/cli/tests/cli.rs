@@ -173,6 +173,19 @@ fn augment_writes_every_output_and_a_manifest_reproducibly() {
         std::fs::read(c.path().join(noise)).unwrap(),
         "another seed must give another output"
     );
+    let err = failed(motionaug(&[
+        "augment",
+        KICK,
+        "--skeleton",
+        ASF,
+        "--recipe",
+        "examples/recipes/kinematic.toml",
+        "--out",
+        c.path().to_str().unwrap(),
+        "--correct-threads",
+        "0",
+    ]));
+    assert!(err.contains("--correct-threads"), "{err}");
 }
 
 #[test]
@@ -842,6 +855,10 @@ fn eval_table_corrects_with_one_class_tracker() {
         "1",
         "--debias-iterations",
         "20",
+        // The corrections two at a time (crates/pipeline's tests check the
+        // numbers equal one after the other's).
+        "--correct-threads",
+        "2",
         "--out",
         out.to_str().unwrap(),
     ]);

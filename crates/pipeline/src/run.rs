@@ -132,8 +132,9 @@ pub fn run(recipe: &Recipe, clips: &[Clip], options: &Options) -> Result<Summary
     run_plan(&plan, clips, Vec::new(), options, Tune::default())
 }
 
-/// What the evaluation table changes about a run; `motionaug augment`
-/// changes nothing ([`Tune::default`]).
+/// How a run differs from [`run`]'s (nothing: [`Tune::default`]): the
+/// evaluation table's correction settings and folder, `motionaug augment
+/// --correct-threads`.
 #[derive(Clone, Copy, Default)]
 pub struct Tune<'a> {
     /// Changes to every correction's settings beyond the plan's (see

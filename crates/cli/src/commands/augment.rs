@@ -4,7 +4,7 @@
 //! tenth file does not cost the first nine clips' work. The recipe runs as the
 //! pipeline crate's job graph in this process: synthesis in parallel, then (with
 //! `[correct]` / `[debias]` / `[vae]` / `[interaction]` tables) the heavier jobs
-//! one after another. Each output is written atomically as BVH + NPZ once its
+//! one after another, or corrections `--correct-threads` at a time. Each output is written atomically as BVH + NPZ once its
 //! last stage is done, and `manifest.json` lists every output at the end
 //! (sorted, so it does not depend on thread scheduling). Corrections keep their
 //! checkpoints in `OUT/work/`: rerunning the same command after a crash reuses
@@ -39,6 +39,11 @@ pub struct Args {
     /// Seed for every random draw; overrides the recipe's `seed`.
     #[arg(long)]
     seed: Option<u64>,
+    /// Corrections that need nothing from each other run this many at a
+    /// time, each on one rollout thread (e.g. the cores to spare); 1 = one
+    /// after the other on the recipe's `[correct]` threads.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    correct_threads: u16,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -89,14 +94,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let work = args.out.join("work");
-    let summary = pipeline::run(
-        &recipe,
+    let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
+    let summary = pipeline::run_plan(
+        &pipeline::plan(&recipe, &names, seed),
         &clips,
+        Vec::new(),
         &Options {
             out: Some(&args.out),
             work: &work,
             seed,
             on_event: &on_event,
+        },
+        pipeline::Tune {
+            parallel_corrections: usize::from(args.correct_threads),
+            ..pipeline::Tune::default()
         },
     )?;
     bar.finish_and_clear();
