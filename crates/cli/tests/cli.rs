@@ -533,6 +533,8 @@ fn bench_correction_corrects_variants_from_the_class_tracker_or_a_second_one() {
             variant.to_str().unwrap(),
             "--variant-tracker-iterations",
             "1",
+            "--clips-at-once",
+            "2",
             "--out",
             out.to_str().unwrap(),
         ])
@@ -546,6 +548,7 @@ fn bench_correction_corrects_variants_from_the_class_tracker_or_a_second_one() {
     let classes: Vec<&str> = rows.iter().map(|r| r["class"].as_str().unwrap()).collect();
     assert_eq!(classes, ["kick", "kick variants"]);
     assert!(rows.iter().all(|r| r["clips"] == 1), "{rows:?}");
+    assert!(rows.iter().all(|r| r["elapsed_s"].is_f64()), "{rows:?}");
     let read = |p: std::path::PathBuf| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap()
     };

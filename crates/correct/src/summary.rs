@@ -37,6 +37,10 @@ pub struct ClassSummary {
     /// Mean and total training wall time per clip, seconds.
     pub mean_wall_s: f64,
     pub total_wall_s: f64,
+    /// Wall time of the whole row as it ran (clips side by side, reused
+    /// ones), seconds, when the runner measured it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub elapsed_s: Option<f64>,
     pub mean_samples: f64,
     /// Clips trained with the sole reward's sliding term.
     #[serde(default)]
@@ -80,8 +84,17 @@ impl ClassSummary {
             },
             mean_wall_s: mean(&|r| r.wall_s),
             total_wall_s: reports.iter().map(|r| r.wall_s).sum(),
+            elapsed_s: None,
             mean_samples: mean(&|r| r.samples as f64),
             sliding_term: reports.iter().filter(|r| r.skate_scale_m_s > 0.0).count(),
+        }
+    }
+
+    /// The row with the wall time it took as run.
+    pub fn elapsed(self, seconds: f64) -> ClassSummary {
+        ClassSummary {
+            elapsed_s: Some(seconds),
+            ..self
         }
     }
 }
@@ -100,7 +113,7 @@ pub fn to_markdown(rows: &[ClassSummary]) -> String {
     let mut s = String::from(
         "| class | clips | accepted | no fall | reward | residual | skating | soles | \
          residual / m g | R_norm | skating m/s | penetration mm | floating % | soles flat % | \
-         wall s / clip | wall s total |\n\
+         wall s / clip | wall s total (elapsed) |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
@@ -110,7 +123,7 @@ pub fn to_markdown(rows: &[ClassSummary]) -> String {
             .collect();
         s += &format!(
             "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} -> {:.3} | {:.1} -> {:.1} | \
-             {:.0} -> {:.0} | {}{:.0} | {:.0} | {:.0} |\n",
+             {:.0} -> {:.0} | {}{:.0} | {:.0} | {:.0}{} |\n",
             r.class,
             r.clips,
             r.accepted,
@@ -128,7 +141,26 @@ pub fn to_markdown(rows: &[ClassSummary]) -> String {
             r.sole_flat_fraction * 100.0,
             r.mean_wall_s,
             r.total_wall_s,
+            r.elapsed_s.map_or(String::new(), |e| format!(" ({e:.0})")),
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_elapsed_time_of_a_row_shows_beside_its_total() {
+        let last_line = |row: &ClassSummary| {
+            let md = to_markdown(std::slice::from_ref(row));
+            md.lines().last().unwrap_or_default().to_string()
+        };
+        let row = ClassSummary::of("kick", &[]);
+        assert!(row.elapsed_s.is_none());
+        assert!(!last_line(&row).contains('('), "{}", last_line(&row));
+        let row = row.elapsed(42.4);
+        assert!(last_line(&row).ends_with(" (42) |"), "{}", last_line(&row));
+    }
 }

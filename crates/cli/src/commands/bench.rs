@@ -207,6 +207,11 @@ struct CorrectionArgs {
     /// `--tracker-budget`); 0 = every variant starts from the class tracker.
     #[arg(long, default_value_t = 0)]
     variant_tracker_iterations: u64,
+    /// Clips corrected side by side (each on --threads rollout threads, so
+    /// `--clips-at-once 2 --threads 1` on two cores); every row also gives
+    /// its elapsed time per clip.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    clips_at_once: u16,
     /// Output folder: one correction folder per clip, table.md, table.json.
     #[arg(long)]
     out: PathBuf,
@@ -313,27 +318,29 @@ fn correct_one(
 }
 
 /// Loads a clip when its correction has not been done yet.
-type Loader<'a> = Box<dyn FnOnce() -> anyhow::Result<motion::Motion> + 'a>;
+type Loader<'a> = Box<dyn FnOnce() -> anyhow::Result<motion::Motion> + Send + 'a>;
 
 /// A class tracker's report and folder.
 type Tracker = (correct::ClassReport, PathBuf);
 
 /// Corrects `clips` (label, loader, the tracker it starts from) into
-/// `out/<label>`, printing one line each; the reports in order.
+/// `out/<label>`, `--clips-at-once` at a time, printing one line each as it
+/// finishes; the reports in order and the elapsed seconds.
 fn correct_all(
     row: &str,
     clips: Vec<(String, Loader<'_>, Option<&Tracker>)>,
     out: &Path,
     args: &CorrectionArgs,
-) -> anyhow::Result<Vec<correct::Report>> {
+) -> anyhow::Result<(Vec<correct::Report>, f64)> {
     let n = clips.len();
-    let mut reports = Vec::with_capacity(n);
-    for (i, (name, load, tracker)) in clips.into_iter().enumerate() {
+    let started = Instant::now();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let one = |(name, load, tracker): (String, Loader<'_>, Option<&Tracker>)| {
         let t = Instant::now();
         let r = correct_one(load, &name, &out.join(&name), args, tracker)?;
+        let i = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         eprintln!(
-            "{row} {}/{n} {name}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
-            i + 1,
+            "{row} {i}/{n} {name}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
             if r.accepted { "accepted" } else { "rejected" },
             r.r_norm,
             r.residual_force_ratio,
@@ -344,9 +351,26 @@ fn correct_all(
                 format!("\n    {}", r.rejected_because.join("\n    "))
             }
         );
-        reports.push(r);
+        Ok(r)
+    };
+    let reports: anyhow::Result<Vec<correct::Report>> = if args.clips_at_once > 1 {
+        use rayon::prelude::*;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(usize::from(args.clips_at_once))
+            .build()?
+            .install(|| clips.into_par_iter().map(one).collect())
+    } else {
+        clips.into_iter().map(one).collect()
+    };
+    let elapsed = started.elapsed().as_secs_f64();
+    if n > 0 {
+        eprintln!(
+            "{row}: {n} clips in {elapsed:.0} s, {:.1} s per clip ({} at once)",
+            elapsed / n as f64,
+            args.clips_at_once
+        );
     }
-    Ok(reports)
+    Ok((reports?, elapsed))
 }
 
 fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
@@ -398,10 +422,10 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 (clip.name.clone(), load, tracker.as_ref())
             })
             .collect();
-        let reports = correct_all(class, originals, &args.out, &args)?;
+        let (reports, elapsed) = correct_all(class, originals, &args.out, &args)?;
         // `--per-class 0` trains the tracker only: no row of nothing.
         if !reports.is_empty() {
-            rows.push(correct::summary::ClassSummary::of(class, &reports));
+            rows.push(correct::summary::ClassSummary::of(class, &reports).elapsed(elapsed));
         }
         if !args.variants.is_empty() {
             let variants = args
@@ -470,8 +494,8 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 })
                 .collect();
             let row = format!("{class} variants");
-            let reports = correct_all(&row, clips, &args.out.join("variants"), &args)?;
-            rows.push(correct::summary::ClassSummary::of(&row, &reports));
+            let (reports, elapsed) = correct_all(&row, clips, &args.out.join("variants"), &args)?;
+            rows.push(correct::summary::ClassSummary::of(&row, &reports).elapsed(elapsed));
         }
         let md = correct::summary::to_markdown(&rows);
         crate::output::write_atomic(&args.out.join("table.md"), md.as_bytes())?;
