@@ -804,8 +804,12 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     // same sets.
     assert!(out.join("work/bk_sneak/samples").is_dir());
     assert!(out.join("work/bk_sneak/vae-2it/model.json").is_file());
+    // This time on two threads: the prediction models side by side give
+    // the errors they gave one after the other.
     std::fs::remove_dir_all(out.join("work/cells")).unwrap();
-    let rerun = motionaug(&args);
+    let mut two = args.to_vec();
+    two.extend(["--threads", "2"]);
+    let rerun = motionaug(&two);
     let stderr = String::from_utf8_lossy(&rerun.stderr).to_string();
     ok(rerun);
     assert!(stderr.contains("vae: reusing"), "{stderr}");
@@ -815,6 +819,15 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
         second["cells"][0]["physics"]["ppo_samples"],
         physics["ppo_samples"]
     );
+    let predicted = |table: &serde_json::Value| -> Vec<(String, serde_json::Value)> {
+        let by_condition = table["cells"][0]["predict"]["gcn"].as_object().unwrap();
+        by_condition
+            .iter()
+            .map(|(c, r)| (c.clone(), r["errors"].clone()))
+            .collect()
+    };
+    assert!(predicted(&first).len() >= 8, "{:?}", predicted(&first));
+    assert_eq!(predicted(&second), predicted(&first));
     // The physics set needs something to correct.
     let mut nothing = args.to_vec();
     nothing[11] = "noise,physics";
@@ -860,7 +873,7 @@ fn eval_table_corrects_with_one_class_tracker() {
         "20",
         // The corrections two at a time (crates/pipeline's tests check the
         // numbers equal one after the other's).
-        "--correct-threads",
+        "--threads",
         "2",
         "--out",
         out.to_str().unwrap(),

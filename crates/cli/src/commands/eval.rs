@@ -494,11 +494,6 @@ struct PhysicsArgs {
     /// clip's planted feet are not put back (shows what the network alone does).
     #[arg(long)]
     debias_no_contacts: bool,
-    /// Corrections that need nothing from each other run this many at a time
-    /// (e.g. the cores to spare; the class trackers still train on one). The
-    /// numbers do not depend on it.
-    #[arg(long, default_value_t = PhysicsConfig::default().threads)]
-    correct_threads: usize,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -561,6 +556,11 @@ struct TableArgs {
     /// rerun reuses them and resumes interrupted corrections.
     #[arg(long)]
     work: Option<PathBuf>,
+    /// Cores to use: corrections that need nothing from each other, and a
+    /// cell's prediction models, run this many at a time (the VAE and the
+    /// class trackers train on one). The numbers do not depend on it.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: u16,
 }
 
 impl TableArgs {
@@ -597,8 +597,8 @@ impl TableArgs {
                 variant_tracker_iterations: p.variant_tracker_iterations,
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
                 debias_restore_contacts: !p.debias_no_contacts,
-                threads: p.correct_threads,
             },
+            threads: usize::from(self.threads),
         }
     }
 }

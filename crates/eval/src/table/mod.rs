@@ -140,6 +140,12 @@ pub struct TableConfig {
     pub predict: bool,
     pub sets: Vec<SetKind>,
     pub physics: PhysicsConfig,
+    /// Cores the table uses: corrections that need nothing from each other,
+    /// and the prediction models of a cell, run this many at a time. Each
+    /// has its own seeds and runs on one thread (the class trackers too), so
+    /// the numbers do not depend on it and it is not part of the JSON.
+    #[serde(skip)]
+    pub threads: usize,
 }
 
 impl Default for TableConfig {
@@ -162,6 +168,7 @@ impl Default for TableConfig {
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
+            threads: 1,
         }
     }
 }
@@ -180,6 +187,9 @@ impl TableConfig {
         let config = |m: &str| Err(EvalError::Config(m.into()));
         if self.data.as_os_str().is_empty() {
             return config("no data folder");
+        }
+        if self.threads == 0 {
+            return config("at least one thread");
         }
         if self.work.as_os_str().is_empty() {
             return config("no work folder");
@@ -461,7 +471,14 @@ fn synthesised_sets(
         if to_correct.is_empty() {
             return Err(EvalError::PhysicsNeedsVae);
         }
-        let p = physics::correct_and_debias(&config.physics, &split.train, &to_correct, work, log)?;
+        let p = physics::correct_and_debias(
+            &config.physics,
+            &split.train,
+            &to_correct,
+            work,
+            config.threads,
+            log,
+        )?;
         for set in p.sets {
             let row = set.row;
             sets.push((format!("{row}_sub"), set.subset));
@@ -516,26 +533,40 @@ fn predict_conditions(
 ) -> Result<(Horizons, BTreeMap<String, ConditionResult>)> {
     let protocol_config = config.train.config(model, split)?;
     let test = TestSet::new(&split.test, &protocol_config)?;
-    let mut by_condition = BTreeMap::new();
-    let mut log_mut = |l: &str| log(l);
-    log(&format!("{model}: no_aug"));
-    by_condition.insert(
-        "no_aug".to_string(),
-        protocol::evaluate(&split.train, &test, &protocol_config, &mut log_mut)?,
+    let mut conditions: Vec<(&str, &[(String, Motion)])> = vec![("no_aug", &[])];
+    conditions.extend(
+        sets.iter()
+            .filter(|(name, clips)| {
+                PREDICT_CONDITIONS.contains(&name.as_str()) && !clips.is_empty()
+            })
+            .map(|(name, clips)| (name.as_str(), clips.as_slice())),
     );
-    for (name, clips) in sets {
-        if !PREDICT_CONDITIONS.contains(&name.as_str()) || clips.is_empty() {
-            continue;
-        }
+    let side_by_side = config.threads > 1;
+    let one = |(name, extra): (&str, &[(String, Motion)])| -> Result<(String, ConditionResult)> {
         log(&format!("{model}: {name}"));
         let mut all = split.train.clone();
-        all.extend(clips.iter().cloned());
-        by_condition.insert(
-            name.clone(),
-            protocol::evaluate(&all, &test, &protocol_config, &mut log_mut)?,
-        );
-    }
-    Ok((test.zero_velocity(), by_condition))
+        all.extend(extra.iter().cloned());
+        // Side by side, each line says whose it is.
+        let mut progress = |l: &str| match side_by_side {
+            true => log(&format!("{model} {name}: {l}")),
+            false => log(l),
+        };
+        let result = protocol::evaluate(&all, &test, &protocol_config, &mut progress)?;
+        Ok((name.to_string(), result))
+    };
+    let results: Result<Vec<(String, ConditionResult)>> = if side_by_side {
+        use rayon::prelude::*;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .build()
+            .map_err(|e| {
+                EvalError::Config(format!("cannot start {} threads: {e}", config.threads))
+            })?
+            .install(|| conditions.into_par_iter().map(one).collect())
+    } else {
+        conditions.into_iter().map(one).collect()
+    };
+    Ok((test.zero_velocity(), results?.into_iter().collect()))
 }
 
 #[cfg(test)]
@@ -557,6 +588,10 @@ mod tests {
         c.sets = vec![SetKind::Physics];
         assert!(matches!(c.validate(), Err(EvalError::PhysicsNeedsVae)));
         c.sets.push(SetKind::Vae);
+        assert!(c.validate().is_ok());
+        c.threads = 0;
+        assert!(matches!(c.validate(), Err(EvalError::Config(m)) if m.contains("thread")));
+        c.threads = 2;
         assert!(c.validate().is_ok());
         c.train.epochs = Some(0.0);
         assert!(matches!(c.validate(), Err(EvalError::Config(_))));

@@ -73,12 +73,6 @@ pub struct PhysicsConfig {
     /// field reads as the struct's default, on).
     #[serde(skip_serializing_if = "is_true")]
     pub debias_restore_contacts: bool,
-    /// Corrections that need nothing from each other run this many at a
-    /// time (the trackers, one after the other, on one thread). Every
-    /// correction has its own seed and one rollout thread, so the numbers do
-    /// not depend on it and it is not part of the table's JSON.
-    #[serde(skip)]
-    pub threads: usize,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -105,18 +99,12 @@ impl Default for PhysicsConfig {
             skate_scale_when_skating_m_s: correct::CorrectConfig::default()
                 .skate_scale_when_skating_m_s,
             debias_restore_contacts: true,
-            threads: 1,
         }
     }
 }
 
 impl PhysicsConfig {
     pub fn validate(&self) -> Result<()> {
-        if self.threads == 0 {
-            return Err(EvalError::Config(
-                "the physics needs at least one thread".into(),
-            ));
-        }
         if !(self.tracker_budget_s.is_finite() && self.tracker_budget_s > 0.0) {
             return Err(EvalError::Config(
                 "the class tracker's time budget must be positive".into(),
@@ -236,7 +224,7 @@ fn tune(config: &PhysicsConfig) -> impl Fn(&mut correct::CorrectConfig) + Sync +
         // One rollout thread: PPO batches its policy over each thread's share
         // of the environments, and products over other batch sizes differ in
         // the last bits, so more threads would change the numbers. Cores go
-        // to corrections side by side instead (`threads`).
+        // to corrections side by side instead (`TableConfig::threads`).
         c.ppo.threads = 1;
         if max_samples.is_some() {
             c.max_samples = max_samples;
@@ -365,14 +353,16 @@ fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
 }
 
 /// Corrects a subset of each of `sets` (see [`PhysicsConfig`]) and the
-/// training clips in `work`, then debiases; finished corrections in `work`
-/// are reused, interrupted ones resumed. The originals' corrections and the
-/// debiaser are shared by all sets.
+/// training clips in `work`, `threads` corrections at a time, then
+/// debiases; finished corrections in `work` are reused, interrupted ones
+/// resumed. The originals' corrections and the debiaser are shared by all
+/// sets.
 pub fn correct_and_debias(
     config: &PhysicsConfig,
     train: &[(String, Motion)],
     sets: &[ToCorrect<'_>],
     work: &Path,
+    threads: usize,
     log: Log,
 ) -> Result<PhysicsSets> {
     let started = Instant::now();
@@ -463,7 +453,7 @@ pub fn correct_and_debias(
         pipeline::Tune {
             correction: Some(&tune_correction),
             corrections_folder: Some("samples"),
-            parallel_corrections: config.threads,
+            parallel_corrections: threads,
         },
     )?;
     let seen = seen
@@ -602,29 +592,6 @@ mod tests {
         assert_eq!(json["debias_restore_contacts"], false);
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(!back.debias_restore_contacts);
-    }
-
-    #[test]
-    fn corrections_side_by_side_leave_the_saved_config_as_it_was() {
-        // The thread count changes wall time, not numbers: a table computed
-        // with 2 must resume with 1 and the other way round.
-        let two = PhysicsConfig {
-            threads: 2,
-            ..PhysicsConfig::default()
-        };
-        let json = serde_json::to_value(&two).unwrap();
-        assert_eq!(
-            json,
-            serde_json::to_value(PhysicsConfig::default()).unwrap()
-        );
-        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
-        assert_eq!(back.threads, 1);
-        assert!(two.validate().is_ok());
-        let none = PhysicsConfig {
-            threads: 0,
-            ..PhysicsConfig::default()
-        };
-        assert!(none.validate().is_err());
     }
 
     #[test]
