@@ -44,3 +44,20 @@ pub fn init() {
         .num_threads(ours)
         .build_global();
 }
+
+/// Stack of each [`job_pool`] thread: the main thread's 8 MiB was enough for
+/// every job, the 2 MiB Rust gives spawned threads was not (a correction's
+/// PPO update overflowed it: candle walks the autograd graph recursively).
+pub const JOB_STACK_BYTES: usize = 64 << 20;
+
+/// A pool of `n` threads named `{name}-{i}` that run whole jobs side by side
+/// (corrections, a table's prediction models), each with [`JOB_STACK_BYTES`]
+/// of stack (reserved, not used, until a job needs it).
+pub fn job_pool(n: usize, name: &str) -> Result<rayon::ThreadPool, rayon::ThreadPoolBuildError> {
+    let name = name.to_string();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .stack_size(JOB_STACK_BYTES)
+        .thread_name(move |i| format!("{name}-{i}"))
+        .build()
+}

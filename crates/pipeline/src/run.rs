@@ -308,10 +308,7 @@ impl<'a> State<'a> {
         };
         let results = match threads {
             None => run_all(),
-            Some(n) => rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .thread_name(|i| format!("correct-{i}"))
-                .build()
+            Some(n) => nn::threads::job_pool(n, "correct")
                 .map_err(|e| PipelineError::Job(format!("cannot start {n} threads: {e}")))?
                 .install(run_all),
         };

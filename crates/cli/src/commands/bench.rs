@@ -355,9 +355,7 @@ fn correct_all(
     };
     let reports: anyhow::Result<Vec<correct::Report>> = if args.clips_at_once > 1 {
         use rayon::prelude::*;
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(usize::from(args.clips_at_once))
-            .build()?
+        nn::threads::job_pool(usize::from(args.clips_at_once), "correct")?
             .install(|| clips.into_par_iter().map(one).collect())
     } else {
         clips.into_iter().map(one).collect()

@@ -556,9 +556,7 @@ fn predict_conditions(
     };
     let results: Result<Vec<(String, ConditionResult)>> = if side_by_side {
         use rayon::prelude::*;
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(config.threads)
-            .build()
+        nn::threads::job_pool(config.threads, "predict")
             .map_err(|e| {
                 EvalError::Config(format!("cannot start {} threads: {e}", config.threads))
             })?
