@@ -126,8 +126,8 @@ fn convert_resamples_and_writes_bvh_and_npz() {
 fn augment_writes_every_output_and_a_manifest_reproducibly() {
     let a = tempfile::tempdir().unwrap();
     let b = tempfile::tempdir().unwrap();
-    let run = |dir: &Path, seed: &str| {
-        ok(motionaug(&[
+    let augment = |dir: &Path, seed: &str, threads: &str| {
+        motionaug(&[
             "augment",
             KICK,
             JOG,
@@ -139,8 +139,11 @@ fn augment_writes_every_output_and_a_manifest_reproducibly() {
             dir.to_str().unwrap(),
             "--seed",
             seed,
-        ]))
+            "--correct-threads",
+            threads,
+        ])
     };
+    let run = |dir: &Path, seed: &str| ok(augment(dir, seed, "1"));
     run(a.path(), "11");
     run(b.path(), "11");
     let manifest: Vec<serde_json::Value> =
@@ -173,18 +176,7 @@ fn augment_writes_every_output_and_a_manifest_reproducibly() {
         std::fs::read(c.path().join(noise)).unwrap(),
         "another seed must give another output"
     );
-    let err = failed(motionaug(&[
-        "augment",
-        KICK,
-        "--skeleton",
-        ASF,
-        "--recipe",
-        "examples/recipes/kinematic.toml",
-        "--out",
-        c.path().to_str().unwrap(),
-        "--correct-threads",
-        "0",
-    ]));
+    let err = failed(augment(c.path(), "12", "0"));
     assert!(err.contains("--correct-threads"), "{err}");
 }
 
