@@ -35,7 +35,7 @@ use crate::features::{
 };
 use crate::model;
 use crate::{DebiasError, Result};
-use nn::{AdamConfig, Mlp, MlpConfig, Optimizer, Params};
+use nn::{AdamConfig, Mlp, MlpConfig, MlpInit, Optimizer, Params};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -54,6 +54,13 @@ pub struct TrainConfig {
     pub validation_fraction: f64,
     /// How the corrected clip's foot contacts are kept when applying.
     pub contacts: ContactConfig,
+    /// Start the network as the training pairs' mean change (its output
+    /// layer zero: a constant offset per rotation value, the simplest model
+    /// of a simulation's bias), so the held-out check at step 0 scores that
+    /// offset alone and training departs from it only as far as the
+    /// held-out pairs reward; off: the layer starts random like the others.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub start_from_mean: bool,
 }
 
 impl Default for TrainConfig {
@@ -68,6 +75,7 @@ impl Default for TrainConfig {
             seed: 0,
             validation_fraction: 0.2,
             contacts: ContactConfig::default(),
+            start_from_mean: false,
         }
     }
 }
@@ -371,7 +379,13 @@ fn fit(
         None => None,
     };
 
-    let mlp_config = MlpConfig::new(id, &config.hidden, od);
+    let mlp_config = MlpConfig {
+        init: match config.start_from_mean {
+            true => MlpInit::ScaledOutput { scale: 0.0 },
+            false => MlpInit::Uniform,
+        },
+        ..MlpConfig::new(id, &config.hidden, od)
+    };
     let params = Params::new(config.seed);
     let mlp = model::build(&mlp_config, &params)?;
     let adam = AdamConfig {
@@ -709,6 +723,35 @@ mod tests {
         let (corrected, original) = &pairs[0];
         let after = error(&model.apply(corrected).expect("apply"), original);
         assert!(after < 0.3 * error(corrected, original), "{after}");
+    }
+
+    #[test]
+    fn started_from_the_mean_change_a_constant_bias_is_removed_before_any_training() {
+        // A constant bias under noise no input predicts: the mean change is
+        // the best a network can do, and where one started from the mean is.
+        let clean = walk();
+        let corrected = biased(&clean);
+        let pairs: Vec<_> = (0..4)
+            .map(|i| (corrected.clone(), jittered(&clean, 300 + i)))
+            .collect();
+        // One step: each network is (nearly) where it started.
+        let one_step = |start_from_mean| TrainConfig {
+            iterations: 1,
+            validation_fraction: 0.0,
+            start_from_mean,
+            ..tiny()
+        };
+        let before = error(&corrected, &clean);
+        let left = |start_from_mean| {
+            let (model, _) = train(&pairs, &one_step(start_from_mean)).expect("train");
+            error(&model.apply(&corrected).expect("apply"), &clean)
+        };
+        let (from_mean, random) = (left(true), left(false));
+        assert!(from_mean < 0.3 * before, "{from_mean} of {before}");
+        assert!(
+            from_mean < 0.85 * random,
+            "{from_mean} vs {random} from random weights"
+        );
     }
 
     #[test]

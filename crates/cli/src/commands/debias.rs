@@ -56,6 +56,10 @@ enum What {
         /// (an ablation; saved with the model).
         #[arg(long)]
         no_metric_contacts: bool,
+        /// Start the network as the pairs' mean change (a constant offset);
+        /// training departs from it only as far as held-out pairs reward.
+        #[arg(long)]
+        start_from_mean: bool,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -85,6 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             no_contacts,
             no_flatten_soles,
             no_metric_contacts,
+            start_from_mean,
         } => {
             let contacts = debias::ContactConfig {
                 restore: !no_contacts,
@@ -98,6 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 seed,
                 validation_fraction,
                 contacts,
+                start_from_mean,
                 ..TrainConfig::default()
             };
             train(&pairs, &clip, &out, &config)

@@ -494,6 +494,11 @@ struct PhysicsArgs {
     /// clip's planted feet are not put back (shows what the network alone does).
     #[arg(long)]
     debias_no_contacts: bool,
+    /// The debiasing network starts as the training pairs' mean change (a
+    /// constant offset) and departs from it only as far as its held-out
+    /// pairs reward.
+    #[arg(long)]
+    debias_start_from_mean: bool,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -597,6 +602,7 @@ impl TableArgs {
                 variant_tracker_iterations: p.variant_tracker_iterations,
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
                 debias_restore_contacts: !p.debias_no_contacts,
+                debias_start_from_mean: p.debias_start_from_mean,
             },
             threads: usize::from(self.threads),
         }

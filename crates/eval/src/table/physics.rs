@@ -73,6 +73,11 @@ pub struct PhysicsConfig {
     /// field reads as the struct's default, on).
     #[serde(skip_serializing_if = "is_true")]
     pub debias_restore_contacts: bool,
+    /// The debiasing network starts as the pairs' mean change
+    /// ([`debias::TrainConfig::start_from_mean`]). Left out of the config's
+    /// JSON when off (the default), so tables saved before it existed resume.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub debias_start_from_mean: bool,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -99,6 +104,7 @@ impl Default for PhysicsConfig {
             skate_scale_when_skating_m_s: correct::CorrectConfig::default()
                 .skate_scale_when_skating_m_s,
             debias_restore_contacts: true,
+            debias_start_from_mean: false,
         }
     }
 }
@@ -417,6 +423,7 @@ pub fn correct_and_debias(
             restore: config.debias_restore_contacts,
             ..defaults.contacts
         },
+        start_from_mean: config.debias_start_from_mean,
         ..defaults
     };
     let plan = pipeline::corrections(
@@ -582,6 +589,7 @@ mod tests {
         let default = PhysicsConfig::default();
         let json = serde_json::to_value(&default).unwrap();
         assert!(json.get("debias_restore_contacts").is_none());
+        assert!(json.get("debias_start_from_mean").is_none());
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(back.debias_restore_contacts);
         let off = PhysicsConfig {
