@@ -295,22 +295,18 @@ impl<'a> State<'a> {
         let threads = self.batch_threads(&first.kind).flatten();
         let on_event = self.options.on_event;
         let state = &*self;
-        let run_all = || -> Vec<(Vec<Made>, Result<(), PipelineError>)> {
-            runnable
-                .par_iter()
-                .map(|job| {
-                    on_event(Event::JobStarted { job });
-                    let (made, r) = state.execute(job, threads.map(|_| 1));
-                    on_event(Event::JobFinished { job, ok: r.is_ok() });
-                    (made, r)
-                })
-                .collect()
+        let run = |job: &&PlannedJob| {
+            on_event(Event::JobStarted { job });
+            let (made, r) = state.execute(job, threads.map(|_| 1));
+            on_event(Event::JobFinished { job, ok: r.is_ok() });
+            (made, r)
         };
-        let results = match threads {
-            None => run_all(),
-            Some(n) => nn::threads::job_pool(n, "correct")
-                .map_err(|e| PipelineError::Job(format!("cannot start {n} threads: {e}")))?
-                .install(run_all),
+        let results: Vec<(Vec<Made>, Result<(), PipelineError>)> = match threads {
+            None => runnable.par_iter().map(run).collect(),
+            Some(n) => nn::threads::side_by_side(runnable.iter().collect(), n, "correct", run)
+                .map_err(|e| {
+                    PipelineError::Job(format!("cannot run {n} corrections at once: {e}"))
+                })?,
         };
         for (job, (made, result)) in runnable.into_iter().zip(results) {
             self.settle(job, made, result)?;

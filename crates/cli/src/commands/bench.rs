@@ -354,9 +354,10 @@ fn correct_all(
         Ok(r)
     };
     let reports: anyhow::Result<Vec<correct::Report>> = if args.clips_at_once > 1 {
-        use rayon::prelude::*;
-        nn::threads::job_pool(usize::from(args.clips_at_once), "correct")?
-            .install(|| clips.into_par_iter().map(one).collect())
+        let at_once = usize::from(args.clips_at_once);
+        nn::threads::side_by_side(clips, at_once, "correct", one)?
+            .into_iter()
+            .collect()
     } else {
         clips.into_iter().map(one).collect()
     };

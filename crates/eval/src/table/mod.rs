@@ -555,12 +555,10 @@ fn predict_conditions(
         Ok((name.to_string(), result))
     };
     let results: Result<Vec<(String, ConditionResult)>> = if side_by_side {
-        use rayon::prelude::*;
-        nn::threads::job_pool(config.threads, "predict")
-            .map_err(|e| {
-                EvalError::Config(format!("cannot start {} threads: {e}", config.threads))
-            })?
-            .install(|| conditions.into_par_iter().map(one).collect())
+        nn::threads::side_by_side(conditions, config.threads, "predict", one)
+            .map_err(|e| EvalError::Data(format!("cannot train models side by side: {e}")))?
+            .into_iter()
+            .collect()
     } else {
         conditions.into_iter().map(one).collect()
     };
