@@ -88,7 +88,7 @@ pub fn side_by_side<T: Send, R: Send>(
             std::thread::Builder::new()
                 .name(format!("{name}-{t}"))
                 .stack_size(JOB_STACK_BYTES)
-                .spawn_scoped(scope, &work)?;
+                .spawn_scoped(scope, work)?;
         }
         Ok(())
     })?;
