@@ -18,7 +18,12 @@
 //! * [`train`]: fitting the MLP on pairs (the `nn` crate's seeded initialisation
 //!   and AdamW); a fifth of the pairs held out picks the number of steps and a
 //!   gain in `[0, 1]` before the refit on all pairs; [`Debiaser`] applies,
-//!   saves and loads it.
+//!   saves and loads it. With `start_from_mean` the output layer starts at
+//!   zero, so the untrained network is the pairs' mean change (a constant
+//!   offset) and the held-out check at step 0 scores that offset alone
+//!   (kick, fold bk: it picked step 1,300 anyway, and the debiased rows of
+//!   the eval table were lower in 13 of 18 cells; `crates/eval/README.md`,
+//!   session 24; off by default until a second fold agrees).
 //!
 //! ## Does it generalise? Measured on grab (session 21)
 //!

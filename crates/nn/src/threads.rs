@@ -45,10 +45,12 @@ pub fn init() {
         .build_global();
 }
 
-/// Stack of each [`side_by_side`] thread: the main thread's 8 MiB was
-/// enough for every job, the 2 MiB Rust gives spawned threads was not (a
-/// correction overflowed it).
-pub const JOB_STACK_BYTES: usize = 64 << 20;
+/// Stack of each [`side_by_side`] thread: the main thread's 8 MiB, on
+/// which every job runs when run one at a time (Rust gives spawned threads
+/// 2 MiB; the stack overflow first seen with corrections side by side came
+/// from the rayon pool described below, which nested corrections inside
+/// each other's waits).
+pub const JOB_STACK_BYTES: usize = 8 << 20;
 
 /// `f` on every item, `n` items at a time on `n` threads named
 /// `{name}-{i}` (items taken in order), results in item order.

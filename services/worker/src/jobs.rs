@@ -143,6 +143,7 @@ async fn run_in(
                 checkpoint_every_s: Some(ctx.checkpoint_every.as_secs_f64()),
                 stop: Some(stop),
                 tune_correction: None,
+                rollout_threads: None,
                 on_progress: &on_progress,
                 on_corrected: &|_| {},
             };
