@@ -21,9 +21,10 @@
 //!   saves and loads it. With `start_from_mean` the output layer starts at
 //!   zero, so the untrained network is the pairs' mean change (a constant
 //!   offset) and the held-out check at step 0 scores that offset alone
-//!   (kick, fold bk: it picked step 1,300 anyway, and the debiased rows of
-//!   the eval table were lower in 13 of 18 cells; `crates/eval/README.md`,
-//!   session 24; off by default until a second fold agrees).
+//!   (kick: the held-out check picked 1,300 and 2,000 steps on folds bk and
+//!   dg, not the offset alone; the eval table's debiased rows were lower in
+//!   13 and 9 of 18 cells: no consistent gain, so off by default;
+//!   `crates/eval/README.md`, session 24).
 //!
 //! ## Does it generalise? Measured on grab (session 21)
 //!
