@@ -53,7 +53,8 @@ pub fn init() {
 pub const JOB_STACK_BYTES: usize = 8 << 20;
 
 /// `f` on every item, `n` items at a time on `n` threads named
-/// `{name}-{i}` (items taken in order), results in item order.
+/// `{name}-{i}` (items taken in order), results in item order; with `n` <= 1
+/// on the calling thread, one after the other.
 ///
 /// Plain threads, not a rayon pool: a rayon worker that waits on another
 /// pool (as a correction waits on its PPO rollout pool) runs other items
@@ -68,6 +69,9 @@ pub fn side_by_side<T: Send, R: Send>(
 ) -> std::io::Result<Vec<R>> {
     use std::sync::Mutex;
     use std::sync::atomic::{AtomicUsize, Ordering};
+    if n <= 1 {
+        return Ok(items.into_iter().map(f).collect());
+    }
     let count = items.len();
     let items: Vec<Mutex<Option<T>>> = items.into_iter().map(|t| Mutex::new(Some(t))).collect();
     let results: Vec<Mutex<Option<R>>> = (0..count).map(|_| Mutex::new(None)).collect();

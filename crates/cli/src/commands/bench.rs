@@ -353,14 +353,11 @@ fn correct_all(
         );
         Ok(r)
     };
-    let reports: anyhow::Result<Vec<correct::Report>> = if args.clips_at_once > 1 {
-        let at_once = usize::from(args.clips_at_once);
+    let at_once = usize::from(args.clips_at_once);
+    let reports: anyhow::Result<Vec<correct::Report>> =
         nn::threads::side_by_side(clips, at_once, "correct", one)?
             .into_iter()
-            .collect()
-    } else {
-        clips.into_iter().map(one).collect()
-    };
+            .collect();
     let elapsed = started.elapsed().as_secs_f64();
     if n > 0 {
         eprintln!(

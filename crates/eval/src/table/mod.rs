@@ -554,14 +554,11 @@ fn predict_conditions(
         let result = protocol::evaluate(&all, &test, &protocol_config, &mut progress)?;
         Ok((name.to_string(), result))
     };
-    let results: Result<Vec<(String, ConditionResult)>> = if side_by_side {
+    let results: Result<Vec<(String, ConditionResult)>> =
         nn::threads::side_by_side(conditions, config.threads, "predict", one)
             .map_err(|e| EvalError::Data(format!("cannot train models side by side: {e}")))?
             .into_iter()
-            .collect()
-    } else {
-        conditions.into_iter().map(one).collect()
-    };
+            .collect();
     Ok((test.zero_velocity(), results?.into_iter().collect()))
 }
 
