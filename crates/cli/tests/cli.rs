@@ -820,6 +820,42 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     };
     assert!(predicted(&first).len() >= 8, "{:?}", predicted(&first));
     assert_eq!(predicted(&second), predicted(&first));
+    // Merged with a copy of itself as another test actor's fold: one table
+    // of both, aggregated over them; the same fold twice is refused.
+    let mut other = second.clone();
+    other["config"]["test_actors"] = serde_json::json!(["zz"]);
+    other["cells"][0]["test_actor"] = "zz".into();
+    let other_json = dir.path().join("other.json");
+    std::fs::write(&other_json, other.to_string()).unwrap();
+    let merged = dir.path().join("merged");
+    let table_json = out.join("table.json");
+    let merge = |tables: [&std::path::Path; 2]| {
+        motionaug(&[
+            "eval",
+            "merge",
+            tables[0].to_str().unwrap(),
+            tables[1].to_str().unwrap(),
+            "--out",
+            merged.to_str().unwrap(),
+        ])
+    };
+    ok(merge([&table_json, &other_json]));
+    let both: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(merged.join("table.json")).unwrap()).unwrap();
+    assert_eq!(
+        both["config"]["test_actors"],
+        serde_json::json!(["bk", "zz"])
+    );
+    assert_eq!(both["cells"].as_array().unwrap().len(), 2);
+    let md = std::fs::read_to_string(merged.join("table.md")).unwrap();
+    assert!(
+        md.contains("## Prediction error, gcn, over test actors and seeds")
+            && md.contains("| sneak (n = 2) |")
+            && md.contains("test actor zz"),
+        "{md}"
+    );
+    let err = failed(merge([&table_json, &table_json]));
+    assert!(err.contains("is in an earlier table too"), "{err}");
     // The physics set needs something to correct.
     let mut nothing = args.to_vec();
     nothing[11] = "noise,physics";

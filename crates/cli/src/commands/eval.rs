@@ -45,6 +45,9 @@ enum Command {
     Predict(PredictArgs),
     /// The whole evaluation table for several classes: JSON + Markdown.
     Table(TableArgs),
+    /// Tables of separate `eval table` runs (e.g. one per test actor) merged
+    /// into one, aggregated over all their folds and seeds.
+    Merge(MergeArgs),
     /// V-DMGNN-GAN's Table 1 on the CMU data of DMGNN's preprocessing:
     /// DMGNN and V-DMGNN-GAN under lower-body and random masks (resumable).
     Cmu(CmuArgs),
@@ -648,11 +651,43 @@ fn run_table(args: TableArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+#[derive(clap::Args)]
+struct MergeArgs {
+    /// `table.json` files of `eval table` runs that differ only in their
+    /// classes and test actors.
+    #[arg(required = true, num_args = 1..)]
+    tables: Vec<PathBuf>,
+    /// Output folder for the merged table.json and table.md.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
+    let tables = args
+        .tables
+        .iter()
+        .map(|path| Ok((path.clone(), table::SavedTable::read(path)?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let merged = table::merge(&tables)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    merged.write(&args.out)?;
+    eprintln!(
+        "merged {} tables ({} cells) into {} and {}",
+        tables.len(),
+        merged.cells.len(),
+        args.out.join("table.json").display(),
+        args.out.join("table.md").display()
+    );
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::Synth(a) => run_synth(a),
         Command::Predict(a) => run_predict(a),
         Command::Table(a) => run_table(a),
+        Command::Merge(a) => run_merge(a),
         Command::Cmu(a) => run_cmu(a),
     }
 }

@@ -9,10 +9,13 @@
 //! * [`physics`]: the physically corrected and debiased rows, through the
 //!   pipeline's one executor.
 //! * `render`: table.json and table.md.
+//! * [`merge`]: tables of separate runs (folds) merged into one, from their
+//!   table.json files.
 //!
 //! Trained VAEs and corrections are kept in `work/<actor>_<class>/`, so a
 //! rerun reuses them and resumes interrupted corrections.
 
+mod merge;
 pub mod physics;
 mod render;
 
@@ -30,6 +33,7 @@ use crate::error::{EvalError, Result};
 use crate::options::TrainOptions;
 use crate::predict::protocol::{self, ConditionResult, Horizons, ModelKind, TestSet};
 use crate::scores::{SynthScores, synth_scores};
+pub use merge::{SavedTable, merge};
 pub use physics::{PhysicsConfig, PhysicsSummary};
 
 /// A synthesised set of the table.

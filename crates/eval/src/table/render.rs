@@ -72,70 +72,17 @@ impl Table {
 
     /// table.md's content.
     pub fn to_markdown(&self) -> String {
-        let mut md = String::new();
-        let _ = writeln!(
-            md,
-            "# motionaug eval table\n\nConfig: `{}`; {:.0} s.\n",
-            self.config_json(),
-            self.seconds
-        );
-        let runs_per_class = self.config.train.seeds.len().max(1)
-            * self
-                .config
-                .test_actors
-                .iter()
-                .filter(|a| self.cells.iter().any(|c| &c.test_actor == *a))
-                .count();
-        if runs_per_class > 1 {
-            for model in &self.config.models {
-                aggregate_tables(&mut md, &model.to_string(), &self.cells);
-            }
-        }
-        for actor in &self.config.test_actors {
-            let row_cells: Vec<&TableCell> = self
-                .cells
-                .iter()
-                .filter(|c| &c.test_actor == actor)
-                .collect();
-            if row_cells.is_empty() {
-                continue;
-            }
-            for model in &self.config.models {
-                prediction_table(&mut md, &model.to_string(), actor, &row_cells);
-            }
-            set_table(
-                &mut md,
-                &format!(
-                    "Synthesis, test actor {actor}: min DTW (synth->test; test->synth) / MMD^2"
-                ),
-                &row_cells,
-                |s| {
-                    format!(
-                        "{:.3}; {:.3} / {:.4}",
-                        s.min_dtw.synth_to_test, s.min_dtw.test_to_synth, s.mmd.mmd2
-                    )
-                },
-            );
-            set_table(
-                &mut md,
-                &format!(
-                    "Plausibility, test actor {actor}: foot skating m/s / mean penetration mm / floating % / pose speed m/s (joints relative to the root; near 0 = frozen clips)"
-                ),
-                &row_cells,
-                |s| {
-                    let p = &s.plausibility;
-                    format!(
-                        "{:.3} / {:.1} / {:.0} / {:.2}",
-                        p.foot_skating_m_s,
-                        1000.0 * p.penetration_mean_m,
-                        100.0 * p.floating_fraction,
-                        p.pose_speed_m_s
-                    )
-                },
-            );
-            correction_table(&mut md, actor, &row_cells);
-        }
-        md
+        let models: Vec<String> = self.config.models.iter().map(|m| m.to_string()).collect();
+        markdown(
+            &self.config_json(),
+            self.seconds,
+            &self.cells,
+            &Layout {
+                models: &models,
+                test_actors: &self.config.test_actors,
+                seeds: self.config.train.seeds.len(),
+            },
+        )
     }
 
     /// Writes `table.json` and `table.md` into `dir` (each atomically).
@@ -147,6 +94,80 @@ impl Table {
         motion::io::write_atomic(&dir.join("table.md"), self.to_markdown().as_bytes())?;
         Ok(())
     }
+}
+
+/// What table.md lays out besides the cells: the models, the test actors in
+/// order, and how many seeds each condition was trained with.
+pub(super) struct Layout<'a> {
+    pub models: &'a [String],
+    pub test_actors: &'a [String],
+    pub seeds: usize,
+}
+
+/// table.md's content for a table whose config reads `config_json`, computed
+/// in `seconds` (a run's, or the runs' summed for a merged table).
+pub(super) fn markdown(
+    config_json: &Value,
+    seconds: f64,
+    cells: &[TableCell],
+    layout: &Layout<'_>,
+) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "# motionaug eval table\n\nConfig: `{}`; {:.0} s.\n",
+        config_json, seconds
+    );
+    let runs_per_class = layout.seeds.max(1)
+        * layout
+            .test_actors
+            .iter()
+            .filter(|a| cells.iter().any(|c| &c.test_actor == *a))
+            .count();
+    if runs_per_class > 1 {
+        for model in layout.models {
+            aggregate_tables(&mut md, model, cells);
+        }
+    }
+    for actor in layout.test_actors {
+        let row_cells: Vec<&TableCell> = cells.iter().filter(|c| &c.test_actor == actor).collect();
+        if row_cells.is_empty() {
+            continue;
+        }
+        for model in layout.models {
+            prediction_table(&mut md, model, actor, &row_cells);
+        }
+        set_table(
+            &mut md,
+            &format!("Synthesis, test actor {actor}: min DTW (synth->test; test->synth) / MMD^2"),
+            &row_cells,
+            |s| {
+                format!(
+                    "{:.3}; {:.3} / {:.4}",
+                    s.min_dtw.synth_to_test, s.min_dtw.test_to_synth, s.mmd.mmd2
+                )
+            },
+        );
+        set_table(
+            &mut md,
+            &format!(
+                "Plausibility, test actor {actor}: foot skating m/s / mean penetration mm / floating % / pose speed m/s (joints relative to the root; near 0 = frozen clips)"
+            ),
+            &row_cells,
+            |s| {
+                let p = &s.plausibility;
+                format!(
+                    "{:.3} / {:.1} / {:.0} / {:.2}",
+                    p.foot_skating_m_s,
+                    1000.0 * p.penetration_mean_m,
+                    100.0 * p.floating_fraction,
+                    p.pose_speed_m_s
+                )
+            },
+        );
+        correction_table(&mut md, actor, &row_cells);
+    }
+    md
 }
 
 /// A Markdown table's header line and rule: `first` over the row names, then
@@ -655,6 +676,76 @@ mod tests {
         assert!(md.contains("| noise | -0.100 +- 0.231 /"), "{md}");
         // One actor, one seed: no aggregate section.
         assert!(!table().to_markdown().contains("over test actors and seeds"));
+    }
+
+    /// A table as its table.json reads back.
+    fn saved(t: &Table) -> crate::table::SavedTable {
+        serde_json::from_value(t.to_json()).expect("table.json reads back")
+    }
+
+    #[test]
+    fn tables_of_one_test_actor_each_merge_into_the_table_of_both() {
+        let cell = |actor: &str, base: f64| {
+            gcn_cell(
+                actor,
+                vec![
+                    ("no_aug", seeds(base, base + 0.2)),
+                    ("noise", seeds(base - 0.2, base + 0.4)),
+                    ("vae_debiased", seeds(base - 0.1, base + 0.1)),
+                ],
+            )
+        };
+        let fold = |actors: &[&str], cells: Vec<TableCell>, seconds: f64| {
+            let mut t = table();
+            t.config.test_actors = actors.iter().map(|a| a.to_string()).collect();
+            t.config.train.seeds = vec![0, 1];
+            t.config.models = vec![ModelKind::Gcn];
+            t.cells = cells;
+            t.seconds = seconds;
+            t
+        };
+        let both = fold(&["bd", "mm"], vec![cell("bd", 1.0), cell("mm", 2.0)], 3.0);
+        let bd = fold(&["bd"], vec![cell("bd", 1.0)], 1.0);
+        let mm = fold(&["mm"], vec![cell("mm", 2.0)], 2.0);
+        let merged = crate::table::merge(&[
+            ("bd.json".into(), saved(&bd)),
+            ("mm.json".into(), saved(&mm)),
+        ])
+        .expect("same config");
+        assert_eq!(merged.to_json(), both.to_json());
+        assert_eq!(merged.to_markdown().expect("layout"), both.to_markdown());
+        assert!(
+            merged
+                .to_markdown()
+                .expect("layout")
+                .contains("over test actors and seeds")
+        );
+
+        // A cell may come from one table only.
+        let err = crate::table::merge(&[
+            ("bd.json".into(), saved(&bd)),
+            ("again.json".into(), saved(&bd)),
+        ])
+        .expect_err("the bd cell twice");
+        assert!(
+            err.to_string()
+                .contains("again.json: the cell of class kick and test actor bd"),
+            "{err}"
+        );
+
+        // Tables computed differently do not merge, and the error says how.
+        let mut other = fold(&["mm"], vec![cell("mm", 2.0)], 2.0);
+        other.config.train.iterations += 1;
+        let err = crate::table::merge(&[
+            ("bd.json".into(), saved(&bd)),
+            ("mm.json".into(), saved(&other)),
+        ])
+        .expect_err("different iterations");
+        assert!(
+            err.to_string()
+                .contains("computed differently (iterations)"),
+            "{err}"
+        );
     }
 
     #[test]
