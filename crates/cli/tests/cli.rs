@@ -796,21 +796,35 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     // same sets.
     assert!(out.join("work/bk_sneak/samples").is_dir());
     assert!(out.join("work/bk_sneak/vae-2it/model.json").is_file());
-    // This time on two threads: the prediction models side by side give
-    // the errors they gave one after the other.
+    // This time on two threads: the originals' corrections (deleted, so
+    // redone) beside the synthesis, the prediction models side by side,
+    // give what one after the other gave.
     std::fs::remove_dir_all(out.join("work/cells")).unwrap();
+    std::fs::remove_dir_all(out.join("work/bk_sneak/originals")).unwrap();
     let mut two = args.to_vec();
     two.extend(["--threads", "2"]);
     let rerun = motionaug(&two);
     let stderr = String::from_utf8_lossy(&rerun.stderr).to_string();
     ok(rerun);
     assert!(stderr.contains("vae: reusing"), "{stderr}");
+    assert!(
+        stderr.contains("the originals' corrections ran beside the synthesis"),
+        "{stderr}"
+    );
+    assert!(out.join("work/bk_sneak/originals").is_dir());
     let second = read();
     assert_eq!(second["cells"][0]["synth"], first["cells"][0]["synth"]);
-    assert_eq!(
-        second["cells"][0]["physics"]["ppo_samples"],
-        physics["ppo_samples"]
-    );
+    for field in [
+        "ppo_samples",
+        "originals_accepted",
+        "mean_r_norm",
+        "samples_accepted",
+    ] {
+        assert_eq!(
+            second["cells"][0]["physics"][field], physics[field],
+            "{field}"
+        );
+    }
     let predicted = |table: &serde_json::Value| -> Vec<(String, serde_json::Value)> {
         let by_condition = table["cells"][0]["predict"]["gcn"].as_object().unwrap();
         by_condition

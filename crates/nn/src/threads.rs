@@ -105,6 +105,29 @@ pub fn side_by_side<T: Send, R: Send>(
         .ok_or_else(|| std::io::Error::other("a job of a side-by-side run did not finish"))
 }
 
+/// `a` on the calling thread and `b` at the same time on a thread named
+/// `name` (with [`JOB_STACK_BYTES`] of stack, like [`side_by_side`]'s):
+/// two different jobs that need nothing from each other, e.g. a VAE's
+/// training beside the originals' corrections. A panic in `b` is resumed
+/// on the caller once `a` is done.
+pub fn beside<RA, RB: Send>(
+    name: &str,
+    a: impl FnOnce() -> RA,
+    b: impl FnOnce() -> RB + Send,
+) -> std::io::Result<(RA, RB)> {
+    std::thread::scope(|scope| {
+        let other = std::thread::Builder::new()
+            .name(name.to_string())
+            .stack_size(JOB_STACK_BYTES)
+            .spawn_scoped(scope, b)?;
+        let ra = a();
+        match other.join() {
+            Ok(rb) => Ok((ra, rb)),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -129,6 +152,27 @@ mod tests {
                 .unwrap()
                 .is_empty()
         );
+    }
+
+    #[test]
+    fn beside_runs_both_jobs_at_once_and_returns_both_results() {
+        // Each job waits for the other to start: they can only both finish
+        // when they run at the same time.
+        let started = std::sync::Barrier::new(2);
+        let (a, b) = beside(
+            "other",
+            || {
+                started.wait();
+                std::thread::current().name().map(str::to_string)
+            },
+            || {
+                started.wait();
+                std::thread::current().name().map(str::to_string)
+            },
+        )
+        .unwrap();
+        assert_ne!(a.as_deref(), Some("other"));
+        assert_eq!(b.as_deref(), Some("other"));
     }
 
     #[test]

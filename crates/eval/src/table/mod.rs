@@ -414,6 +414,40 @@ fn synthesised_sets(
     cell: &mut TableCell,
     log: crate::Log,
 ) -> Result<Vec<Set>> {
+    let physics = config.has(SetKind::Physics);
+    let mut sets = if physics && config.threads >= 2 {
+        // The originals' corrections (and the class tracker) need nothing
+        // from the synthesised sets: on the second thread while the VAE
+        // trains; the plan below finds them finished and reuses them.
+        let (sets, originals) = nn::threads::beside(
+            "originals",
+            || made_sets(config, class, split, work, cell, log),
+            || physics::correct_originals(&config.physics, &split.train, work, log),
+        )
+        .map_err(|e| EvalError::Data(format!("cannot start a thread: {e}")))?;
+        let seconds = originals?;
+        log(&format!(
+            "the originals' corrections ran beside the synthesis: {seconds:.0} s"
+        ));
+        sets?
+    } else {
+        made_sets(config, class, split, work, cell, log)?
+    };
+    if physics {
+        correct_sets(config, split, work, cell, &mut sets, log)?;
+    }
+    Ok(sets)
+}
+
+/// The noise, IK, VAE and VAE & IK sets (as made, before any correction).
+fn made_sets(
+    config: &TableConfig,
+    class: &str,
+    split: &Split,
+    work: &std::path::Path,
+    cell: &mut TableCell,
+    log: crate::Log,
+) -> Result<Vec<Set>> {
     let mut sets: Vec<Set> = Vec::new();
     if config.has(SetKind::Noise) {
         let noise = pipeline::Recipe::from_toml_str(&format!(
@@ -464,40 +498,51 @@ fn synthesised_sets(
         let union = union_of(&sets, "vae_near", "ik");
         sets.push(("vae_ik".into(), time_warped(&union)?));
     }
-    if config.has(SetKind::Physics) {
-        let to_correct: Vec<physics::ToCorrect<'_>> = [("vae", "vae_near"), ("ik", "ik")]
-            .into_iter()
-            .filter_map(|(row, set)| {
-                let clips = sets.iter().find(|(n, _)| n == set)?.1.as_slice();
-                Some(physics::ToCorrect { row, clips })
-            })
-            .collect();
-        if to_correct.is_empty() {
-            return Err(EvalError::PhysicsNeedsVae);
-        }
-        let p = physics::correct_and_debias(
-            &config.physics,
-            &split.train,
-            &to_correct,
-            work,
-            config.threads,
-            log,
-        )?;
-        for set in p.sets {
-            let row = set.row;
-            sets.push((format!("{row}_sub"), set.subset));
-            sets.push((format!("{row}_corrected"), set.corrected));
-            sets.push((format!("{row}_debiased"), set.debiased));
-        }
-        cell.physics = Some(p.summary);
-        if config.has(SetKind::VaeIk) {
-            for stage in ["sub", "corrected", "debiased"] {
-                let union = union_of(&sets, &format!("vae_{stage}"), &format!("ik_{stage}"));
-                sets.push((format!("vae_ik_{stage}"), time_warped(&union)?));
-            }
+    Ok(sets)
+}
+
+/// The physics rows: subsets of the VAE's near samples and of the IK edits,
+/// corrected and debiased (appended to `sets`; the summary goes into `cell`).
+fn correct_sets(
+    config: &TableConfig,
+    split: &Split,
+    work: &std::path::Path,
+    cell: &mut TableCell,
+    sets: &mut Vec<Set>,
+    log: crate::Log,
+) -> Result<()> {
+    let to_correct: Vec<physics::ToCorrect<'_>> = [("vae", "vae_near"), ("ik", "ik")]
+        .into_iter()
+        .filter_map(|(row, set)| {
+            let clips = sets.iter().find(|(n, _)| n == set)?.1.as_slice();
+            Some(physics::ToCorrect { row, clips })
+        })
+        .collect();
+    if to_correct.is_empty() {
+        return Err(EvalError::PhysicsNeedsVae);
+    }
+    let p = physics::correct_and_debias(
+        &config.physics,
+        &split.train,
+        &to_correct,
+        work,
+        config.threads,
+        log,
+    )?;
+    for set in p.sets {
+        let row = set.row;
+        sets.push((format!("{row}_sub"), set.subset));
+        sets.push((format!("{row}_corrected"), set.corrected));
+        sets.push((format!("{row}_debiased"), set.debiased));
+    }
+    cell.physics = Some(p.summary);
+    if config.has(SetKind::VaeIk) {
+        for stage in ["sub", "corrected", "debiased"] {
+            let union = union_of(sets, &format!("vae_{stage}"), &format!("ik_{stage}"));
+            sets.push((format!("vae_ik_{stage}"), time_warped(&union)?));
         }
     }
-    Ok(sets)
+    Ok(())
 }
 
 /// The clips of sets `a` and `b` together (a set not made adds nothing).

@@ -358,6 +358,90 @@ fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
         .collect()
 }
 
+/// The correction step every job of the table's plans runs.
+fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
+    let class = config.policy == pipeline::PolicyKind::Class;
+    pipeline::CorrectStep {
+        time_budget_s: config.correct_budget_s,
+        policy: config.policy,
+        max_iterations: class.then_some(config.clip_iterations),
+        tracker_iterations: Some(config.tracker_iterations),
+        tracker_budget_s: config.tracker_budget_s,
+        variant_tracker_iterations: config.variant_tracker_iterations,
+        skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
+        ..pipeline::CorrectStep::default()
+    }
+}
+
+/// Runs a plan of the table's corrections in `work`, `threads` at a time,
+/// tuned as the table tunes them ([`tune`], the samples' corrections kept in
+/// `work/samples/`).
+fn run_corrections(
+    config: &PhysicsConfig,
+    plan: &pipeline::Plan,
+    clips: &[pipeline::Clip],
+    made: Vec<pipeline::WorkClip>,
+    work: &Path,
+    threads: usize,
+    on_event: &(dyn Fn(pipeline::Event<'_>) + Sync),
+) -> Result<pipeline::Summary> {
+    let tune_correction = tune(config);
+    Ok(pipeline::run_plan(
+        plan,
+        clips,
+        made,
+        &pipeline::Options {
+            out: None,
+            work,
+            seed: 0,
+            on_event,
+        },
+        pipeline::Tune {
+            correction: Some(&tune_correction),
+            corrections_folder: Some("samples"),
+            parallel_corrections: threads,
+        },
+    )?)
+}
+
+/// The training clips' corrections on their own, one at a time (with `policy
+/// = class` the class tracker first): the same jobs, seeds and folders as in
+/// [`correct_and_debias`], which finds them finished in `work` and reuses
+/// them. They need nothing from the synthesised sets, so the table runs them
+/// beside the VAE's training when it has a second thread; the rows do not
+/// change. Returns the wall seconds.
+pub fn correct_originals(
+    config: &PhysicsConfig,
+    train: &[(String, Motion)],
+    work: &Path,
+    log: Log,
+) -> Result<f64> {
+    let started = Instant::now();
+    let originals = spread(train, config.correct_originals.unwrap_or(train.len()));
+    let names: Vec<String> = originals.iter().map(|(n, _)| n.clone()).collect();
+    let seeds: HashMap<&str, u64> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i as u64))
+        .collect();
+    let plan = pipeline::corrections(&names, &[], &correct_step(config), None, |name| {
+        seeds.get(name).copied().unwrap_or(0)
+    });
+    let seen = Mutex::new(Seen::default());
+    let on_event = |event: pipeline::Event<'_>| {
+        if let Ok(mut seen) = seen.lock() {
+            seen.observe(event, &names, names.len(), log);
+        }
+    };
+    let clips = pipeline::Clip::all_from(&originals);
+    let run = run_corrections(config, &plan, &clips, Vec::new(), work, 1, &on_event)?;
+    let failures = unexpected_failures(&run, false);
+    if !failures.is_empty() {
+        return Err(EvalError::Correction(failures.join("; ")));
+    }
+    Ok(started.elapsed().as_secs_f64())
+}
+
 /// Corrects a subset of each of `sets` (see [`PhysicsConfig`]) and the
 /// training clips in `work`, `threads` corrections at a time, then
 /// debiases; finished corrections in `work` are reused, interrupted ones
@@ -405,17 +489,7 @@ pub fn correct_and_debias(
         .enumerate()
         .map(|(i, n)| (n.as_str(), i as u64))
         .collect();
-    let class = config.policy == pipeline::PolicyKind::Class;
-    let step = pipeline::CorrectStep {
-        time_budget_s: config.correct_budget_s,
-        policy: config.policy,
-        max_iterations: class.then_some(config.clip_iterations),
-        tracker_iterations: Some(config.tracker_iterations),
-        tracker_budget_s: config.tracker_budget_s,
-        variant_tracker_iterations: config.variant_tracker_iterations,
-        skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
-        ..pipeline::CorrectStep::default()
-    };
+    let step = correct_step(config);
     let defaults = debias::TrainConfig::default();
     let debias = debias::TrainConfig {
         iterations: config.debias_iterations,
@@ -446,23 +520,7 @@ pub fn correct_and_debias(
             seen.observe(event, &original_names, total, log);
         }
     };
-    let tune_correction = tune(config);
-    let run = pipeline::run_plan(
-        &plan,
-        &clips,
-        made,
-        &pipeline::Options {
-            out: None,
-            work,
-            seed: 0,
-            on_event: &on_event,
-        },
-        pipeline::Tune {
-            correction: Some(&tune_correction),
-            corrections_folder: Some("samples"),
-            parallel_corrections: threads,
-        },
-    )?;
+    let run = run_corrections(config, &plan, &clips, made, work, threads, &on_event)?;
     let seen = seen
         .into_inner()
         .map_err(|_| EvalError::Data("a correction's progress report panicked".into()))?;
