@@ -477,3 +477,32 @@ fn a_static_root_above_the_hips_corrects_like_the_plain_layout() {
         }
     }
 }
+
+#[test]
+fn the_rollout_threads_do_not_change_a_correction() {
+    // A correction's own network sizes and 8 environments: what the table
+    // and the service's workers run, on one thread or two.
+    let clip = kick();
+    let run = |threads: usize, rollout_batch: usize| {
+        let mut config = CorrectConfig {
+            max_iterations: Some(1),
+            target_r_norm: None,
+            checkpoint_every_s: 0.0,
+            ..CorrectConfig::default()
+        };
+        config.ppo.samples_per_iteration = 512;
+        config.ppo.minibatch_size = 256;
+        config.ppo.epochs = 1;
+        config.ppo.threads = threads;
+        config.ppo.rollout_batch = rollout_batch;
+        let dir = tempfile::tempdir().unwrap();
+        let out = correct(&clip, "kick", &config, dir.path(), false, |_| {}).unwrap();
+        // Everything but wall times: the simulated clip and its scores.
+        (out.motion, out.report.r_norm, out.report.mean_reward)
+    };
+    let one = run(1, 4);
+    assert_eq!(one, run(2, 4));
+    // The batch shapes the numbers (what one thread gave before batches were
+    // fixed: all 8 environments in one batch).
+    assert_ne!(one, run(1, 8));
+}

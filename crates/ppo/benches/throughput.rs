@@ -137,6 +137,8 @@ fn main() {
                 minibatch_size: 2048,
                 epochs: 2,
                 threads,
+                // The two threads' halves, as before batches were fixed.
+                rollout_batch: 16,
                 norm_warmup_steps: 1,
                 ..PpoConfig::reference()
             };

@@ -30,8 +30,18 @@ pub struct PpoConfig {
     /// Steps per environment run before the first iteration to initialise the
     /// observation normaliser (no learning from them).
     pub norm_warmup_steps: usize,
-    /// Rollout worker threads (each owns a contiguous share of the environments).
+    /// Rollout worker threads: each steps whole batches of `rollout_batch`
+    /// environments, so the experience does not depend on this.
     pub threads: usize,
+    /// Environments stepped in lock-step with one batched policy + value
+    /// forward per step during a rollout. Products over different batch
+    /// sizes differ in their last bits, so this (not `threads`) shapes the
+    /// numbers, and at most `envs / rollout_batch` threads have work.
+    /// Default 4: 8 environments on 2 threads, the batches every run had
+    /// before the field existed when it used 2 rollout threads (older
+    /// configs read as 4).
+    #[serde(default = "default_rollout_batch")]
+    pub rollout_batch: usize,
     /// Entropy bonus (only matters with a learnable log-std).
     pub entropy_coef: f32,
 }
@@ -60,6 +70,7 @@ impl PpoConfig {
             obs_clip: 5.0,
             norm_warmup_steps: 30,
             threads: 2,
+            rollout_batch: default_rollout_batch(),
             entropy_coef: 0.0,
         }
     }
@@ -87,8 +98,8 @@ impl PpoConfig {
         if self.samples_per_iteration == 0 || self.minibatch_size == 0 || self.epochs == 0 {
             return bad("samples_per_iteration, minibatch_size and epochs must be > 0".into());
         }
-        if self.threads == 0 {
-            return bad("threads must be > 0".into());
+        if self.threads == 0 || self.rollout_batch == 0 {
+            return bad("threads and rollout_batch must be > 0".into());
         }
         if self.obs_clip.is_nan() || self.obs_clip <= 0.0 {
             return bad(format!("obs_clip must be > 0, got {}", self.obs_clip));
@@ -103,6 +114,10 @@ impl PpoConfig {
         }
         Ok(())
     }
+}
+
+fn default_rollout_batch() -> usize {
+    4
 }
 
 /// Small, fast settings for tests and toy problems.
@@ -129,6 +144,7 @@ impl Default for PpoConfig {
             obs_clip: 5.0,
             norm_warmup_steps: 10,
             threads: 2,
+            rollout_batch: default_rollout_batch(),
             entropy_coef: 0.0,
         }
     }

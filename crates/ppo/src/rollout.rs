@@ -1,9 +1,11 @@
-//! Experience collection: each worker thread owns a contiguous share of the environments,
-//! steps them in lock-step and runs one batched policy + value forward per step for its
-//! share. Each environment draws its action noise and resets from its own RNG, seeded by
-//! the trainer at the start of the iteration, and the observation normaliser is frozen
-//! during the rollout (each environment gathers its own statistics, merged afterwards in
-//! environment order). So the experience does not depend on how threads are scheduled.
+//! Experience collection: the environments are cut into batches of `rollout_batch`
+//! (whatever the thread count); a worker thread takes whole batches, steps a batch in
+//! lock-step and runs one batched policy + value forward per step for it. Each
+//! environment draws its action noise and resets from its own RNG, seeded by the trainer
+//! at the start of the iteration, and the observation normaliser is frozen during the
+//! rollout (each environment gathers its own statistics, merged afterwards in
+//! environment order). So the experience does not depend on how many threads there are
+//! or how they are scheduled.
 //!
 //! Every iteration starts all environments from a reset and ends with a truncation
 //! (bootstrapped by the critic), which lets a checkpoint hold the whole training state

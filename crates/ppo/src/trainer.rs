@@ -480,7 +480,9 @@ impl<E: Env> Trainer<E> {
     /// Collect `steps` steps on every environment in parallel.
     fn collect(&mut self, steps: usize) -> Result<Vec<Trajectory>> {
         let seeds: Vec<u64> = (0..self.slots.len()).map(|_| self.rng.next_u64()).collect();
-        let chunk = self.slots.len().div_ceil(self.config.threads);
+        // Batches of a fixed size, whatever the thread count: a thread takes
+        // whole batches, so the experience is the same on any number of them.
+        let chunk = self.config.rollout_batch.clamp(1, self.slots.len().max(1));
         let log_std = self.policy.log_std().to_vec1::<f32>()?;
         let actor = Actor {
             policy: &self.policy,

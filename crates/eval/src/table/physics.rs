@@ -13,8 +13,9 @@
 //! corrected original's policy, train the debiasing network on the
 //! (corrected original, original) pairs of accepted corrections, apply it to
 //! the accepted corrected samples. What the table changes is in
-//! [`pipeline::Tune`]: at most `correct_samples` PPO samples per clip on one
-//! rollout thread, and the samples' corrections kept in `work/samples/`.
+//! [`pipeline::Tune`]: at most `correct_samples` PPO samples per clip, the
+//! table's threads for a tracker running alone (one per correction side by
+//! side), and the samples' corrections kept in `work/samples/`.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
@@ -219,19 +220,20 @@ pub fn spread<T: Clone>(items: &[T], count: usize) -> Vec<T> {
         .collect()
 }
 
-/// The single rollout thread of every correction and tracker, and
-/// (per-clip policies) the sample bound; a class tracker and its fine-tuning
-/// are bounded by iterations instead (a sample bound would cut the tracker
-/// short).
-fn tune(config: &PhysicsConfig) -> impl Fn(&mut correct::CorrectConfig) + Sync + use<> {
+/// The rollout threads of a job that runs alone (a tracker; corrections side
+/// by side get one each from the runner), and (per-clip policies) the sample
+/// bound; a class tracker and its fine-tuning are bounded by iterations
+/// instead (a sample bound would cut the tracker short). PPO's experience
+/// does not depend on its thread count (`ppo::PpoConfig::rollout_batch`), so
+/// neither do the rows.
+fn tune(
+    config: &PhysicsConfig,
+    threads: usize,
+) -> impl Fn(&mut correct::CorrectConfig) + Sync + use<> {
     let max_samples =
         (config.policy == pipeline::PolicyKind::Clip).then_some(config.correct_samples);
     move |c: &mut correct::CorrectConfig| {
-        // One rollout thread: PPO batches its policy over each thread's share
-        // of the environments, and products over other batch sizes differ in
-        // the last bits, so more threads would change the numbers. Cores go
-        // to corrections side by side instead (`TableConfig::threads`).
-        c.ppo.threads = 1;
+        c.ppo.threads = threads.max(1);
         if max_samples.is_some() {
             c.max_samples = max_samples;
         }
@@ -385,7 +387,7 @@ fn run_corrections(
     threads: usize,
     on_event: &(dyn Fn(pipeline::Event<'_>) + Sync),
 ) -> Result<pipeline::Summary> {
-    let tune_correction = tune(config);
+    let tune_correction = tune(config, threads);
     Ok(pipeline::run_plan(
         plan,
         clips,
