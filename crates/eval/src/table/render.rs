@@ -635,20 +635,24 @@ mod tests {
         }
     }
 
+    /// A kick cell with two seeds of no_aug, noise and vae_debiased: the
+    /// debiased row is 0.1 below no_aug in every run, and +0.1 or -0.3 from
+    /// noise (no consistent sign).
+    fn two_seed_cell(actor: &str, base: f64) -> TableCell {
+        gcn_cell(
+            actor,
+            vec![
+                ("no_aug", seeds(base, base + 0.2)),
+                ("noise", seeds(base - 0.2, base + 0.4)),
+                ("vae_debiased", seeds(base - 0.1, base + 0.1)),
+            ],
+        )
+    }
+
     #[test]
     fn over_actors_and_seeds_the_full_method_is_paired_with_each_row() {
-        // Two test actors x two seeds; the debiased row is 0.1 below no_aug
-        // in every run, and +0.1 or -0.3 from noise (no consistent sign).
-        let cell = |actor: &str, base: f64| {
-            gcn_cell(
-                actor,
-                vec![
-                    ("no_aug", seeds(base, base + 0.2)),
-                    ("noise", seeds(base - 0.2, base + 0.4)),
-                    ("vae_debiased", seeds(base - 0.1, base + 0.1)),
-                ],
-            )
-        };
+        // Two test actors x two seeds (`two_seed_cell`).
+        let cell = two_seed_cell;
         let mut t = table();
         t.config.test_actors = vec!["bd".into(), "mm".into()];
         t.config.train.seeds = vec![0, 1];
@@ -685,16 +689,7 @@ mod tests {
 
     #[test]
     fn tables_of_one_test_actor_each_merge_into_the_table_of_both() {
-        let cell = |actor: &str, base: f64| {
-            gcn_cell(
-                actor,
-                vec![
-                    ("no_aug", seeds(base, base + 0.2)),
-                    ("noise", seeds(base - 0.2, base + 0.4)),
-                    ("vae_debiased", seeds(base - 0.1, base + 0.1)),
-                ],
-            )
-        };
+        let cell = two_seed_cell;
         let fold = |actors: &[&str], cells: Vec<TableCell>, seconds: f64| {
             let mut t = table();
             t.config.test_actors = actors.iter().map(|a| a.to_string()).collect();
@@ -721,31 +716,23 @@ mod tests {
                 .contains("over test actors and seeds")
         );
 
+        // Why two tables do not merge.
+        let refused = |a: &Table, b: (&str, &Table)| {
+            crate::table::merge(&[("bd.json".into(), saved(a)), (b.0.into(), saved(b.1))])
+                .expect_err("refused")
+                .to_string()
+        };
         // A cell may come from one table only.
-        let err = crate::table::merge(&[
-            ("bd.json".into(), saved(&bd)),
-            ("again.json".into(), saved(&bd)),
-        ])
-        .expect_err("the bd cell twice");
+        let err = refused(&bd, ("again.json", &bd));
         assert!(
-            err.to_string()
-                .contains("again.json: the cell of class kick and test actor bd"),
+            err.contains("again.json: the cell of class kick and test actor bd"),
             "{err}"
         );
-
         // Tables computed differently do not merge, and the error says how.
         let mut other = fold(&["mm"], vec![cell("mm", 2.0)], 2.0);
         other.config.train.iterations += 1;
-        let err = crate::table::merge(&[
-            ("bd.json".into(), saved(&bd)),
-            ("mm.json".into(), saved(&other)),
-        ])
-        .expect_err("different iterations");
-        assert!(
-            err.to_string()
-                .contains("computed differently (iterations)"),
-            "{err}"
-        );
+        let err = refused(&bd, ("mm.json", &other));
+        assert!(err.contains("computed differently (iterations)"), "{err}");
     }
 
     #[test]
