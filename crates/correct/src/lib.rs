@@ -16,6 +16,28 @@
 //!   reference frames), trained on many clips; every clip's correction starts
 //!   from it (`[correct] policy = "class"`, `bench correction --tracker-clips`).
 //!
+//! ## Session 25 (2026-12-06): the same numbers on any thread count; two cores as two clips
+//!
+//! PPO now steps its environments in batches of `ppo::PpoConfig::rollout_batch`
+//! (4) whatever its thread count (before, a thread batched its whole share,
+//! so one rollout thread gave other bits than two). Side by side in one run
+//! on the quiet machine, 6 kicks spread over the class, 8 PPO iterations each
+//! from scratch, two rounds interleaved (`motionaug bench correction --data
+//! ../shared/data/hdm05 --classes kick --per-class 6 --max-iterations 8
+//! --threads T --clips-at-once C --out OUT`):
+//!
+//! | layout | elapsed s (round 1 / 2) | s per clip amortised | own s per clip |
+//! |---|---|---|---|
+//! | one clip at a time, 2 rollout threads | 38.9 / 40.4 | 6.6 | 6.6 |
+//! | two clips at a time, 1 rollout thread each | 27.2 / 25.7 | 4.4 | 8.7 |
+//!
+//! Two clips at a time get **1.50x** the throughput of one clip on both cores,
+//! and every clip's R_norm, residual force and criteria are identical in all
+//! four runs (`tests/correct.rs`, `the_rollout_threads_do_not_change_a_correction`,
+//! checks the simulated clip bit for bit). So corrections go side by side
+//! (`eval table --threads`, `augment --correct-threads`, several workers)
+//! and only a job that runs alone (a class tracker) takes both threads.
+//!
 //! ## Session 22 (2026-12-06): deposit's VAE samples from stronger trackers
 //!
 //! Session 21 left deposit's VAE samples at 31 % (99 of 320) behind a class
