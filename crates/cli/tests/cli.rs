@@ -870,6 +870,14 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     );
     let err = failed(merge([&table_json, &table_json]));
     assert!(err.contains("is in an earlier table too"), "{err}");
+    // A file that is not a table says so, naming it.
+    let not_a_table = dir.path().join("not-a-table.json");
+    std::fs::write(&not_a_table, "{\"cells\": 3}").unwrap();
+    let err = failed(merge([&table_json, &not_a_table]));
+    assert!(
+        err.contains("not-a-table.json: not a table.json of `eval table`"),
+        "{err}"
+    );
     // The physics set needs something to correct.
     let mut nothing = args.to_vec();
     nothing[11] = "noise,physics";
