@@ -13,7 +13,7 @@ use serde::Deserialize;
 use serde_json::{Value, json};
 
 use super::TableCell;
-use super::render::{Layout, markdown};
+use super::render::{Layout, markdown, write_files};
 use crate::error::{EvalError, Result};
 use crate::predict::protocol::ModelKind;
 
@@ -77,13 +77,7 @@ impl SavedTable {
 
     /// Writes `table.json` and `table.md` into `dir` (each atomically).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let markdown = self.to_markdown()?;
-        let mut json = serde_json::to_vec_pretty(&self.to_json())
-            .map_err(|e| EvalError::Data(format!("table.json: {e}")))?;
-        json.push(b'\n');
-        motion::io::write_atomic(&dir.join("table.json"), &json)?;
-        motion::io::write_atomic(&dir.join("table.md"), markdown.as_bytes())?;
-        Ok(())
+        write_files(dir, &self.to_json(), &self.to_markdown()?)
     }
 }
 

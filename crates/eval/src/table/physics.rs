@@ -360,6 +360,26 @@ fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
         .collect()
 }
 
+/// The training clips the table corrects (for the debiaser's pairs): the
+/// same in [`correct_originals`] and [`correct_and_debias`], so the second
+/// finds the first's corrections.
+fn originals_to_correct(
+    config: &PhysicsConfig,
+    train: &[(String, Motion)],
+) -> Vec<(String, Motion)> {
+    spread(train, config.correct_originals.unwrap_or(train.len()))
+}
+
+/// Each clip's correction seed: its place in `names` (the originals first,
+/// so their seeds are the same with or without the samples after them).
+fn seeds_in_order<'a>(names: impl IntoIterator<Item = &'a String>) -> HashMap<&'a str, u64> {
+    names
+        .into_iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i as u64))
+        .collect()
+}
+
 /// The correction step every job of the table's plans runs.
 fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
     let class = config.policy == pipeline::PolicyKind::Class;
@@ -419,13 +439,9 @@ pub fn correct_originals(
     log: Log,
 ) -> Result<f64> {
     let started = Instant::now();
-    let originals = spread(train, config.correct_originals.unwrap_or(train.len()));
+    let originals = originals_to_correct(config, train);
     let names: Vec<String> = originals.iter().map(|(n, _)| n.clone()).collect();
-    let seeds: HashMap<&str, u64> = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| (n.as_str(), i as u64))
-        .collect();
+    let seeds = seeds_in_order(&names);
     let plan = pipeline::corrections(&names, &[], &correct_step(config), None, |name| {
         seeds.get(name).copied().unwrap_or(0)
     });
@@ -461,7 +477,7 @@ pub fn correct_and_debias(
     let per_set = config.correct_count.unwrap_or(2 * train.len());
     let subsets: Vec<Vec<(String, Motion)>> =
         sets.iter().map(|s| spread(s.clips, per_set)).collect();
-    let originals = spread(train, config.correct_originals.unwrap_or(train.len()));
+    let originals = originals_to_correct(config, train);
     let all_samples: Vec<&(String, Motion)> = subsets.iter().flatten().collect();
     if originals.is_empty() || all_samples.is_empty() {
         return Err(EvalError::Data(format!(
@@ -485,12 +501,7 @@ pub fn correct_and_debias(
     // Seeds as the table always had them: the originals 0.., then the
     // samples, set after set (the VAE's first, so its seeds did not change
     // when the IK edits joined).
-    let seeds: HashMap<&str, u64> = original_names
-        .iter()
-        .chain(&sample_names)
-        .enumerate()
-        .map(|(i, n)| (n.as_str(), i as u64))
-        .collect();
+    let seeds = seeds_in_order(original_names.iter().chain(&sample_names));
     let step = correct_step(config);
     let defaults = debias::TrainConfig::default();
     let debias = debias::TrainConfig {

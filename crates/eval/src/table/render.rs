@@ -87,13 +87,19 @@ impl Table {
 
     /// Writes `table.json` and `table.md` into `dir` (each atomically).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let mut json = serde_json::to_vec_pretty(&self.to_json())
-            .map_err(|e| EvalError::Data(format!("table.json: {e}")))?;
-        json.push(b'\n');
-        motion::io::write_atomic(&dir.join("table.json"), &json)?;
-        motion::io::write_atomic(&dir.join("table.md"), self.to_markdown().as_bytes())?;
-        Ok(())
+        write_files(dir, &self.to_json(), &self.to_markdown())
     }
+}
+
+/// Writes a table's `table.json` (pretty, newline-terminated) and `table.md`
+/// into `dir`, each atomically: [`Table::write`] and `SavedTable::write`.
+pub(super) fn write_files(dir: &Path, json: &Value, markdown: &str) -> Result<()> {
+    let mut bytes =
+        serde_json::to_vec_pretty(json).map_err(|e| EvalError::Data(format!("table.json: {e}")))?;
+    bytes.push(b'\n');
+    motion::io::write_atomic(&dir.join("table.json"), &bytes)?;
+    motion::io::write_atomic(&dir.join("table.md"), markdown.as_bytes())?;
+    Ok(())
 }
 
 /// What table.md lays out besides the cells: the models, the test actors in
