@@ -355,7 +355,8 @@ pub fn execute(
                 Some(group) => Warm::Tracker(inputs.tracker(group)?),
                 None => Warm::None,
             };
-            let outcome = correction(ctx, step, *seed, clip, &source.motion, warm)?;
+            let config = step.original_config(*seed);
+            let outcome = correction(ctx, config, clip, &source.motion, warm)?;
             out.put(Made::Original {
                 clip: clip.clone(),
                 outcome,
@@ -398,7 +399,7 @@ pub fn execute(
                     }
                 }
             };
-            let outcome = correction(ctx, step, *seed, clip, &made.motion, warm)?;
+            let outcome = correction(ctx, step.config(*seed), clip, &made.motion, warm)?;
             let summary = CorrectionSummary::new(&outcome.report, ctx.report_path.clone());
             if !outcome.report.accepted && !step.keep_rejected {
                 tracing::info!(clip, "correction not accepted; the clip is left out");
@@ -476,16 +477,15 @@ enum Warm {
     Tracker(PathBuf),
 }
 
-/// A correction in the job's folder with the job's settings and the context's changes.
+/// A correction in the job's folder with the job's settings (`config`) and
+/// the context's changes.
 fn correction(
     ctx: &Context,
-    step: &crate::CorrectStep,
-    seed: u64,
+    mut config: correct::CorrectConfig,
     name: &str,
     motion: &Motion,
     warm: Warm,
 ) -> Result<correct::Outcome, PipelineError> {
-    let mut config = step.config(seed);
     ctx.apply_to(&mut config);
     let warm_start = match warm {
         Warm::None => None,

@@ -658,6 +658,11 @@ fn numeric_recipe_fields_have_upper_bounds() {
         ),
         (
             "[correct]",
+            "original_max_iterations",
+            "[correct]\noriginal_max_iterations = 1000001\n",
+        ),
+        (
+            "[correct]",
             "tracker_iterations",
             "[correct]\npolicy = \"class\"\ntracker_iterations = 1000001\n",
         ),
@@ -733,11 +738,11 @@ fn numeric_recipe_fields_have_upper_bounds() {
     // The bounds themselves are accepted.
     let at_bounds = format!(
         "{base}[vae]\niterations = 100000\nnear_members = 10000\nsmooth_s = 1.0\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
-         policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\ntracker_iterations = 1000000\n\
-         variant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
+         policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\noriginal_max_iterations = 1000000\n\
+         tracker_iterations = 1000000\nvariant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 21);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 22);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.
@@ -799,13 +804,15 @@ fn plan_size_counts_what_plan_makes() {
 }
 
 /// Every correction of a [`pipeline::corrections`] plan (each clip made
-/// three times under other names, one PPO iteration each) with `parallel`
+/// three times under other names, one PPO iteration each, the original
+/// two: `original_max_iterations`) with `parallel`
 /// corrections at a time: clip -> (R_norm, iterations, tracked clip).
 fn corrections_side_by_side(parallel: usize) -> Vec<(String, f64, u64, motion::Motion)> {
     let original = kick();
     let step = CorrectStep {
         time_budget_s: 600.0,
         max_iterations: Some(1),
+        original_max_iterations: Some(2),
         target_r_norm: 2.0,
         // Never accepted as is, so every clip trains its iteration.
         accept_threshold: 1.0,
@@ -892,7 +899,8 @@ fn corrections_side_by_side_give_what_they_give_one_after_the_other() {
         run.iter().map(|c| (c.0.clone(), c.1, c.2)).collect()
     };
     assert_eq!(numbers(&one), numbers(&two));
-    assert!(one.iter().all(|c| c.2 == 1), "{:?}", numbers(&one));
+    let iterations: Vec<u64> = one.iter().map(|c| c.2).collect();
+    assert_eq!(iterations, [1, 1, 1, 2], "the original trains its own cap");
     for (a, b) in one.iter().zip(&two) {
         assert!(a.3 == b.3, "{}: the tracked clips differ", a.0);
     }

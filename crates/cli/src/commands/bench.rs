@@ -152,6 +152,11 @@ struct CorrectionArgs {
     /// PPO iterations per clip at most (a machine-independent budget).
     #[arg(long)]
     max_iterations: Option<u64>,
+    /// PPO iterations at most of the originals' corrections, when they
+    /// should differ from `--max-iterations` (`[correct]
+    /// original_max_iterations`).
+    #[arg(long)]
+    original_max_iterations: Option<u64>,
     /// Rollout threads per clip.
     #[arg(long, default_value_t = correct::CorrectConfig::default().ppo.threads)]
     threads: usize,
@@ -294,13 +299,14 @@ fn load_hdm05(path: &Path, asf: &Path) -> anyhow::Result<motion::Motion> {
     )?)
 }
 
-/// Corrects (or reuses) one clip into `dir`, from the class tracker when
-/// there is one.
+/// Corrects (or reuses) one clip into `dir` for at most `max_iterations`,
+/// from the class tracker when there is one.
 fn correct_one(
     load: impl FnOnce() -> anyhow::Result<motion::Motion>,
     name: &str,
     dir: &Path,
     args: &CorrectionArgs,
+    max_iterations: Option<u64>,
     tracker: Option<&Tracker>,
 ) -> anyhow::Result<correct::Report> {
     let done = dir.join("report.json");
@@ -308,7 +314,10 @@ fn correct_one(
         return Ok(correct::Report::read(&done)?);
     }
     let motion = load()?;
-    let base = base_config(args);
+    let base = correct::CorrectConfig {
+        max_iterations,
+        ..base_config(args)
+    };
     let config = match tracker {
         Some((report, class_dir)) => report.warm_config(&base, class_dir),
         None => base,
@@ -324,20 +333,22 @@ type Loader<'a> = Box<dyn FnOnce() -> anyhow::Result<motion::Motion> + Send + 'a
 type Tracker = (correct::ClassReport, PathBuf);
 
 /// Corrects `clips` (label, loader, the tracker it starts from) into
-/// `out/<label>`, `--clips-at-once` at a time, printing one line each as it
-/// finishes; the reports in order and the elapsed seconds.
+/// `out/<label>` for at most `max_iterations` each, `--clips-at-once` at a
+/// time, printing one line each as it finishes; the reports in order and the
+/// elapsed seconds.
 fn correct_all(
     row: &str,
     clips: Vec<(String, Loader<'_>, Option<&Tracker>)>,
     out: &Path,
     args: &CorrectionArgs,
+    max_iterations: Option<u64>,
 ) -> anyhow::Result<(Vec<correct::Report>, f64)> {
     let n = clips.len();
     let started = Instant::now();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let one = |(name, load, tracker): (String, Loader<'_>, Option<&Tracker>)| {
         let t = Instant::now();
-        let r = correct_one(load, &name, &out.join(&name), args, tracker)?;
+        let r = correct_one(load, &name, &out.join(&name), args, max_iterations, tracker)?;
         let i = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         eprintln!(
             "{row} {i}/{n} {name}: {} (R_norm {:.3}, residual {:.3} m g, {:.0} s){}",
@@ -418,7 +429,8 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 (clip.name.clone(), load, tracker.as_ref())
             })
             .collect();
-        let (reports, elapsed) = correct_all(class, originals, &args.out, &args)?;
+        let iterations = args.original_max_iterations.or(args.max_iterations);
+        let (reports, elapsed) = correct_all(class, originals, &args.out, &args, iterations)?;
         // `--per-class 0` trains the tracker only: no row of nothing.
         if !reports.is_empty() {
             rows.push(correct::summary::ClassSummary::of(class, &reports).elapsed(elapsed));
@@ -490,7 +502,13 @@ fn bench_correction(args: CorrectionArgs) -> anyhow::Result<()> {
                 })
                 .collect();
             let row = format!("{class} variants");
-            let (reports, elapsed) = correct_all(&row, clips, &args.out.join("variants"), &args)?;
+            let (reports, elapsed) = correct_all(
+                &row,
+                clips,
+                &args.out.join("variants"),
+                &args,
+                args.max_iterations,
+            )?;
             rows.push(correct::summary::ClassSummary::of(&row, &reports).elapsed(elapsed));
         }
         let md = correct::summary::to_markdown(&rows);

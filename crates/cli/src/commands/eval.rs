@@ -483,6 +483,10 @@ struct PhysicsArgs {
     /// PPO iterations of a clip's fine-tuning at most (--correct-policy class).
     #[arg(long, default_value_t = PhysicsConfig::default().clip_iterations)]
     clip_iterations: u64,
+    /// PPO iterations at most of a training clip's own correction
+    /// (--correct-policy class); default: --clip-iterations.
+    #[arg(long)]
+    original_iterations: Option<u64>,
     /// Samples the class tracker fails as is start from a second tracker,
     /// trained on them from the class tracker for at most this many PPO
     /// iterations (--correct-policy class); 0 = off.
@@ -602,6 +606,7 @@ impl TableArgs {
                 tracker_iterations: p.tracker_iterations,
                 tracker_budget_s: p.tracker_budget_s,
                 clip_iterations: p.clip_iterations,
+                original_iterations: p.original_iterations,
                 variant_tracker_iterations: p.variant_tracker_iterations,
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
                 debias_restore_contacts: !p.debias_no_contacts,

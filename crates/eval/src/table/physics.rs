@@ -54,6 +54,12 @@ pub struct PhysicsConfig {
     pub tracker_budget_s: f64,
     /// PPO iterations of a clip's fine-tuning at most (`policy = class`).
     pub clip_iterations: u64,
+    /// PPO iterations at most of a training clip's own correction (`policy =
+    /// class`; `[correct] original_max_iterations`); `None`: `clip_iterations`.
+    /// Left out of the config's JSON when `None`, so tables saved before it
+    /// existed still resume and merge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub original_iterations: Option<u64>,
     /// With `policy = class`, samples the class tracker fails as is start from
     /// a second tracker trained on them for at most this many PPO iterations
     /// (`[correct] variant_tracker_iterations`); 0 = off. Left out of the
@@ -101,6 +107,7 @@ impl Default for PhysicsConfig {
             tracker_iterations: 150,
             tracker_budget_s: 6000.0,
             clip_iterations: 15,
+            original_iterations: None,
             variant_tracker_iterations: 0,
             skate_scale_when_skating_m_s: correct::CorrectConfig::default()
                 .skate_scale_when_skating_m_s,
@@ -115,6 +122,12 @@ impl PhysicsConfig {
         if !(self.tracker_budget_s.is_finite() && self.tracker_budget_s > 0.0) {
             return Err(EvalError::Config(
                 "the class tracker's time budget must be positive".into(),
+            ));
+        }
+        if self.original_iterations.is_some() && self.policy != pipeline::PolicyKind::Class {
+            return Err(EvalError::Config(
+                "the training clips' own iterations (original iterations) need the class policy"
+                    .into(),
             ));
         }
         if self.variant_tracker_iterations > 0 && self.policy != pipeline::PolicyKind::Class {
@@ -387,6 +400,7 @@ fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
         time_budget_s: config.correct_budget_s,
         policy: config.policy,
         max_iterations: class.then_some(config.clip_iterations),
+        original_max_iterations: config.original_iterations.filter(|_| class),
         tracker_iterations: Some(config.tracker_iterations),
         tracker_budget_s: config.tracker_budget_s,
         variant_tracker_iterations: config.variant_tracker_iterations,
@@ -661,6 +675,7 @@ mod tests {
         let json = serde_json::to_value(&default).unwrap();
         assert!(json.get("debias_restore_contacts").is_none());
         assert!(json.get("debias_start_from_mean").is_none());
+        assert!(json.get("original_iterations").is_none());
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(back.debias_restore_contacts);
         let off = PhysicsConfig {
@@ -671,6 +686,24 @@ mod tests {
         assert_eq!(json["debias_restore_contacts"], false);
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(!back.debias_restore_contacts);
+    }
+
+    #[test]
+    fn the_originals_own_iterations_need_the_class_policy() {
+        let clip = PhysicsConfig {
+            original_iterations: Some(200),
+            ..PhysicsConfig::default()
+        };
+        let e = clip.validate().expect_err("clip policy").to_string();
+        assert!(e.contains("original iterations"), "{e}");
+        let class = PhysicsConfig {
+            policy: pipeline::PolicyKind::Class,
+            ..clip
+        };
+        class.validate().expect("class policy");
+        let step = super::correct_step(&class);
+        assert_eq!(step.original_max_iterations, Some(200));
+        assert_eq!(step.max_iterations, Some(class.clip_iterations));
     }
 
     #[test]
