@@ -316,13 +316,12 @@ impl CorrectStep {
     }
 
     /// The settings of a source clip's own correction: [`Self::config`] with
-    /// `original_max_iterations` when set.
+    /// `original_max_iterations` (when unset, `max_iterations`).
     pub fn original_config(&self, seed: u64) -> correct::CorrectConfig {
-        let mut c = self.config(seed);
-        if let Some(n) = self.original_max_iterations {
-            c.max_iterations = Some(n);
+        correct::CorrectConfig {
+            max_iterations: self.original_max_iterations.or(self.max_iterations),
+            ..self.config(seed)
         }
-        c
     }
 
     /// The class tracker's settings (`policy = "class"`): the clips' settings
