@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::contacts::{self, ContactConfig, ContactReport};
 use crate::features::{
-    apply_rotations, input_dim, inputs, output_dim, rotations_of, state_dim, states,
+    apply_rotations, input_dim, inputs, low_pass, output_dim, rotations_of, state_dim, states,
 };
 use crate::model;
 use crate::{DebiasError, Result};
@@ -61,6 +61,10 @@ pub struct TrainConfig {
     /// held-out pairs reward; off: the layer starts random like the others.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub start_from_mean: bool,
+    /// Standard deviation, seconds, of the Gaussian low-pass over time of the
+    /// predicted change ([`crate::features::low_pass`]), in the held-out
+    /// check and when applying; 0 = none (the paper's per-frame change).
+    pub smoothing_s: f64,
 }
 
 impl Default for TrainConfig {
@@ -76,6 +80,7 @@ impl Default for TrainConfig {
             validation_fraction: 0.2,
             contacts: ContactConfig::default(),
             start_from_mean: false,
+            smoothing_s: 0.0,
         }
     }
 }
@@ -103,6 +108,12 @@ impl TrainConfig {
         }
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
             return bad(format!("weight_decay {} is negative", self.weight_decay));
+        }
+        if !(self.smoothing_s.is_finite() && self.smoothing_s >= 0.0) {
+            return bad(format!(
+                "smoothing_s {} is not a number >= 0",
+                self.smoothing_s
+            ));
         }
         self.contacts.validate()
     }
@@ -197,6 +208,10 @@ struct Meta {
     fps: f64,
     mlp: MlpConfig,
     contacts: ContactConfig,
+    /// Low-pass of the predicted change, seconds (models saved before it
+    /// existed read as 0: none).
+    #[serde(default)]
+    smoothing_s: f64,
     /// Where the corrected originals' planted soles are (for `flatten_soles`).
     #[serde(default)]
     sole_height_m: Option<f64>,
@@ -276,19 +291,22 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         } else {
             &mut kept
         };
+        let frames = y.len() / output_dim(joints);
         part.x.extend_from_slice(&x);
         part.y.extend_from_slice(&y);
+        part.lengths.push(frames);
         all.x.extend(x);
         all.y.extend(y);
+        all.lengths.push(frames);
     }
     let (steps, gain, validation) = if held_out.is_empty() {
         (config.iterations, 1.0, None)
     } else {
-        let (_, best) = fit(&kept, joints, config, config.iterations, Some(&val))?;
+        let (_, best) = fit(&kept, joints, fps, config, config.iterations, Some(&val))?;
         let best = best.ok_or_else(|| DebiasError::Data("no held-out check ran".into()))?;
         (best.iteration, best.gain, Some((best.loss_zero, best.loss)))
     };
-    let (fitted, _) = fit(&all, joints, config, steps, None)?;
+    let (fitted, _) = fit(&all, joints, fps, config, steps, None)?;
     let report = TrainReport {
         pairs: pairs.len(),
         frames: fitted.frames,
@@ -317,6 +335,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         fps,
         mlp: fitted.mlp_config,
         contacts: config.contacts,
+        smoothing_s: config.smoothing_s,
         sole_height_m: contacts::sole_height(
             &pairs.iter().map(|(c, _)| c).collect::<Vec<_>>(),
             &config.contacts,
@@ -334,6 +353,8 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
 struct Rows {
     x: Vec<f32>,
     y: Vec<f32>,
+    /// Frames of each pair, in order (the low-pass stays within a clip).
+    lengths: Vec<usize>,
 }
 
 /// A network fitted on some rows, with the standardisation it was fitted with.
@@ -355,6 +376,7 @@ struct Fitted {
 fn fit(
     rows: &Rows,
     joints: usize,
+    fps: f64,
     config: &TrainConfig,
     steps: usize,
     held_out: Option<&Rows>,
@@ -374,7 +396,7 @@ fn fit(
     let val = match held_out {
         Some(v) => {
             let x = Tensor::from_vec(input.apply(&v.x), (v.y.len() / od, id), &Device::Cpu)?;
-            Some((x, v.y.as_slice()))
+            Some((x, v))
         }
         None => None,
     };
@@ -405,7 +427,10 @@ fn fit(
     let mut best: Option<Best> = None;
     let check = |it: usize, best: Option<Best>| -> Result<Option<Best>> {
         match &val {
-            Some((x, y)) => Best::keep(best, it, &mlp, x, y, &output),
+            Some((x, rows)) => {
+                let sigma = config.smoothing_s * fps;
+                Best::keep(best, it, &mlp, x, rows, sigma, &output)
+            }
             None => Ok(best),
         }
     };
@@ -472,18 +497,26 @@ struct Best {
 }
 
 impl Best {
-    /// Score the current weights on the held-out frames (raw units, with their
+    /// Score the current weights on the held-out frames (raw units, the
+    /// change low-passed by `sigma` frames as when applied, with its
     /// least-squares gain in [0, 1]) and keep them if they beat `best`.
     fn keep(
         best: Option<Best>,
         iteration: usize,
         mlp: &Mlp,
         x_val: &Tensor,
-        y_val: &[f32],
+        val: &Rows,
+        sigma: f64,
         output: &Standardiser,
     ) -> Result<Option<Best>> {
+        let y_val = val.y.as_slice();
         let pred = mlp.forward(x_val)?.flatten_all()?.to_vec1::<f32>()?;
-        let pred = output.invert(&pred);
+        let pred = low_pass(
+            &output.invert(&pred),
+            output.mean.len(),
+            &val.lengths,
+            sigma,
+        );
         let (mut py, mut pp, mut yy) = (0.0f64, 0.0f64, 0.0f64);
         for (p, y) in pred.iter().zip(y_val) {
             let (p, y) = (*p as f64, *y as f64);
@@ -552,10 +585,9 @@ impl Debiaser {
         let x = Tensor::from_vec(x, (frames, 2 * sd), &Device::Cpu)?;
         let delta = self.mlp.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
         let gain = self.meta.report.gain as f32;
-        let delta: Vec<f32> = self
-            .meta
-            .output
-            .invert(&delta)
+        let delta = self.meta.output.invert(&delta);
+        let sigma = self.meta.smoothing_s * self.meta.fps;
+        let delta: Vec<f32> = low_pass(&delta, output_dim(self.meta.joints), &[frames], sigma)
             .iter()
             .map(|d| gain * d)
             .collect();
@@ -777,6 +809,47 @@ mod tests {
         );
     }
 
+    /// Mean frame-to-frame turn of the bent upper arm, rad.
+    fn arm_jitter(m: &Motion) -> f64 {
+        let [arm, _] = bent_joints(m);
+        let turns: f64 = (1..m.frames())
+            .map(|t| motion::rotation::angle_between(m.rotation(t, arm), m.rotation(t - 1, arm)))
+            .sum();
+        turns / (m.frames() - 1) as f64
+    }
+
+    #[test]
+    fn the_low_pass_drops_memorised_jitter_and_keeps_the_bias() {
+        // One pair, no held-out check: the network memorises the original's
+        // per-frame noise on top of the constant bias.
+        let clean = walk();
+        let corrected = biased(&clean);
+        let original = jittered(&clean, 400);
+        let config = TrainConfig {
+            iterations: 1500,
+            validation_fraction: 0.0,
+            ..tiny()
+        };
+        let (mut model, _) = train(&[(corrected.clone(), original)], &config).expect("train");
+        let raw = model.apply(&corrected).expect("apply");
+        model.meta.smoothing_s = 0.1;
+        let smooth = model.apply(&corrected).expect("apply");
+        let (base, raw_j, smooth_j) = (
+            arm_jitter(&corrected),
+            arm_jitter(&raw),
+            arm_jitter(&smooth),
+        );
+        assert!(raw_j > base + 0.05, "memorised jitter {raw_j} vs {base}");
+        assert!(
+            smooth_j - base < 0.3 * (raw_j - base),
+            "jitter left {smooth_j} (raw {raw_j}, corrected {base})"
+        );
+        // The constant bias is still removed.
+        let before = error(&corrected, &clean);
+        let after = error(&smooth, &clean);
+        assert!(after < 0.5 * before, "error {before} -> {after}");
+    }
+
     #[test]
     fn held_out_pairs_are_whole_clips_and_never_all() {
         assert!(held_out(1, 0.2, 0).is_empty());
@@ -837,6 +910,14 @@ mod tests {
         let bad_configs = [
             TrainConfig {
                 iterations: 0,
+                ..tiny()
+            },
+            TrainConfig {
+                smoothing_s: -0.1,
+                ..tiny()
+            },
+            TrainConfig {
+                smoothing_s: f64::NAN,
                 ..tiny()
             },
             TrainConfig {

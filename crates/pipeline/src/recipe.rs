@@ -479,6 +479,7 @@ pub mod bounds {
         "metres per second",
     );
     pub const DEBIAS_BLEND_S: Bound = bound("debias", "contacts.blend_s", 10.0, "seconds");
+    pub const DEBIAS_SMOOTHING_S: Bound = bound("debias", "smoothing_s", 10.0, "seconds");
     pub const DEBIAS_CLEARANCE_M: Bound = bound("debias", "contacts.clearance_m", 1.0, "metres");
     pub const DEBIAS_STILL_SPEED: Bound = bound(
         "debias",
@@ -509,6 +510,7 @@ pub mod bounds {
         DEBIAS_HEIGHT_BAND_M,
         DEBIAS_MAX_SPEED,
         DEBIAS_BLEND_S,
+        DEBIAS_SMOOTHING_S,
         DEBIAS_CLEARANCE_M,
         DEBIAS_STILL_SPEED,
     ];
@@ -736,6 +738,7 @@ impl Recipe {
             bounds::DEBIAS_HEIGHT_BAND_M.check(d.contacts.height_band_m)?;
             bounds::DEBIAS_MAX_SPEED.check(d.contacts.max_speed_m_s)?;
             bounds::DEBIAS_BLEND_S.check(d.contacts.blend_s)?;
+            bounds::DEBIAS_SMOOTHING_S.check(d.smoothing_s)?;
             bounds::DEBIAS_CLEARANCE_M.check(d.contacts.clearance_m)?;
             bounds::DEBIAS_STILL_SPEED.check(d.contacts.still_speed_m_s)?;
         }

@@ -717,6 +717,11 @@ fn numeric_recipe_fields_have_upper_bounds() {
         ),
         (
             "[debias]",
+            "smoothing_s",
+            "[correct]\n[debias]\nsmoothing_s = 1e9\n",
+        ),
+        (
+            "[debias]",
             "height_band_m",
             "[correct]\n[debias.contacts]\nheight_band_m = 1e9\n",
         ),
@@ -739,10 +744,10 @@ fn numeric_recipe_fields_have_upper_bounds() {
     let at_bounds = format!(
         "{base}[vae]\niterations = 100000\nnear_members = 10000\nsmooth_s = 1.0\n[correct]\ntime_budget_s = 86400\nenvs = 64\n\
          policy = \"class\"\ntracker_budget_s = 604800\nmax_iterations = 1000000\noriginal_max_iterations = 1000000\n\
-         tracker_iterations = 1000000\nvariant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
+         tracker_iterations = 1000000\nvariant_tracker_iterations = 1000000\n[debias]\niterations = 200000\nbatch_size = 65536\nsmoothing_s = 10.0\nhidden = [4096, 4096, 4096, 4096, 4096, 4096, 4096, 4096]\n"
     );
     Recipe::from_toml_str(&at_bounds).expect("values at their bounds");
-    assert_eq!(pipeline::recipe::bounds::ALL.len(), 22);
+    assert_eq!(pipeline::recipe::bounds::ALL.len(), 23);
 }
 
 /// `plan::size` counts the graph `plan` makes without making it.

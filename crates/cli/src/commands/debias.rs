@@ -60,6 +60,10 @@ enum What {
         /// training departs from it only as far as held-out pairs reward.
         #[arg(long)]
         start_from_mean: bool,
+        /// Low-pass the predicted change over time with a Gaussian of this
+        /// standard deviation, seconds (0: none; saved with the model).
+        #[arg(long, default_value_t = TrainConfig::default().smoothing_s)]
+        smoothing: f64,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -90,6 +94,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             no_flatten_soles,
             no_metric_contacts,
             start_from_mean,
+            smoothing,
         } => {
             let contacts = debias::ContactConfig {
                 restore: !no_contacts,
@@ -104,6 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 validation_fraction,
                 contacts,
                 start_from_mean,
+                smoothing_s: smoothing,
                 ..TrainConfig::default()
             };
             train(&pairs, &clip, &out, &config)

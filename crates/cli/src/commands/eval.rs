@@ -506,6 +506,10 @@ struct PhysicsArgs {
     /// pairs reward.
     #[arg(long)]
     debias_start_from_mean: bool,
+    /// Low-pass the debiasing network's change over time with a Gaussian
+    /// of this standard deviation, seconds (0: none).
+    #[arg(long, default_value_t = PhysicsConfig::default().debias_smoothing_s)]
+    debias_smoothing: f64,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -611,6 +615,7 @@ impl TableArgs {
                 skate_scale_when_skating_m_s: p.skate_scale_when_skating,
                 debias_restore_contacts: !p.debias_no_contacts,
                 debias_start_from_mean: p.debias_start_from_mean,
+                debias_smoothing_s: p.debias_smoothing,
             },
             threads: usize::from(self.threads),
         }

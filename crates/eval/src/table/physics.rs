@@ -85,6 +85,15 @@ pub struct PhysicsConfig {
     /// JSON when off (the default), so tables saved before it existed resume.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub debias_start_from_mean: bool,
+    /// Low-pass of the debiasing network's change over time, seconds
+    /// ([`debias::TrainConfig::smoothing_s`]); 0 = none. Left out of the
+    /// config's JSON when 0, so tables saved before it existed resume.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub debias_smoothing_s: f64,
+}
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -113,6 +122,7 @@ impl Default for PhysicsConfig {
                 .skate_scale_when_skating_m_s,
             debias_restore_contacts: true,
             debias_start_from_mean: false,
+            debias_smoothing_s: 0.0,
         }
     }
 }
@@ -525,6 +535,7 @@ pub fn correct_and_debias(
             ..defaults.contacts
         },
         start_from_mean: config.debias_start_from_mean,
+        smoothing_s: config.debias_smoothing_s,
         ..defaults
     };
     let plan = pipeline::corrections(
@@ -676,6 +687,7 @@ mod tests {
         assert!(json.get("debias_restore_contacts").is_none());
         assert!(json.get("debias_start_from_mean").is_none());
         assert!(json.get("original_iterations").is_none());
+        assert!(json.get("debias_smoothing_s").is_none());
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(back.debias_restore_contacts);
         let off = PhysicsConfig {
