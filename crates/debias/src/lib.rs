@@ -54,6 +54,39 @@
 //!   debiaser learns it per actor. Synthesised clips come from the training
 //!   actors (IK edits of their clips, VAE samples near them), the case it
 //!   handles; a clip of a new body is not.
+//!
+//! ## Jitter, and the low-pass (session 27)
+//!
+//! The network predicts each frame's change from that frame alone, so its
+//! errors differ from frame to frame and, added to a clip, are jitter.
+//! Measured on HDM05 kick, fold dg (the eval table's work folder:
+//! 19 accepted corrected originals as pairs, 410 accepted corrected IK edits
+//! and VAE samples), as the mean jerk of the joint positions (`motionaug
+//! metrics --json`, `jerk_m_s3`) after `motionaug debias apply`:
+//!
+//! | clips | input | corrected | debiased | debiased, `smoothing_s` 0.05 | 0.1 |
+//! |---|---|---|---|---|---|
+//! | 19 originals it trained on | 195 | 191 | 286 | 204 | 204 |
+//! | 4 rejected originals (unseen) | 180 | 181 | 436 | 197 | 189 |
+//! | 212 IK edits | 210 | 213 | 473 | 235 | |
+//! | 198 VAE samples | 90 | 109 | 192 | 123 | |
+//!
+//! Debiasing doubled the jerk of the synthesised clips (the contact step is
+//! not the cause: with `contacts.restore = false` it is as high, 1.5-2.6x).
+//! A Gaussian low-pass of the predicted change over time
+//! ([`features::low_pass`], `TrainConfig::smoothing_s`, default 0.05 s =
+//! 1.5 frames at 30 fps) brings it to 1.1x; the held-out loss is unchanged
+//! (0.00165 -> 0.00070 at 0 and at 0.05 s, 0.00075 at 0.1 s) and the
+//! held-out gain rises (0.93 -> 0.99). (Session 22 saw only +7 % in the
+//! rotations' second differences: a per-frame error grows with each
+//! derivative, and the joint positions add up the rotations along a limb.)
+//! In the eval table (fold dg, the same corrections, 3 seeds, paired) the
+//! low-pass lowers the GCN's full method by -0.019* / -0.014* / -0.017* rad
+//! (beyond the spread; 0.815 / 1.396 / 1.773 -> 0.797 / 1.382 / 1.757) and
+//! raises seq2seq's by +0.008 / +0.020 / +0.040 (within it): jitter is a
+//! small part of what debiasing costs the GCN (+0.06 rad over the corrected
+//! rows; crates/eval/README.md, session 27). The default is on for what it
+//! does to the clips (jerk), not for the table.
 
 pub mod contacts;
 pub mod features;

@@ -86,8 +86,10 @@ pub struct PhysicsConfig {
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub debias_start_from_mean: bool,
     /// Low-pass of the debiasing network's change over time, seconds
-    /// ([`debias::TrainConfig::smoothing_s`]); 0 = none. Left out of the
-    /// config's JSON when 0, so tables saved before it existed resume.
+    /// ([`debias::TrainConfig::smoothing_s`], the same default); 0 = none.
+    /// Tables saved before it existed read as 0 (their debiased rows were
+    /// made without it) and are recomputed under the new default; 0 is
+    /// left out of the JSON, so they still merge with tables run with 0.
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub debias_smoothing_s: f64,
 }
@@ -122,7 +124,7 @@ impl Default for PhysicsConfig {
                 .skate_scale_when_skating_m_s,
             debias_restore_contacts: true,
             debias_start_from_mean: false,
-            debias_smoothing_s: 0.0,
+            debias_smoothing_s: debias::TrainConfig::default().smoothing_s,
         }
     }
 }
@@ -687,9 +689,25 @@ mod tests {
         assert!(json.get("debias_restore_contacts").is_none());
         assert!(json.get("debias_start_from_mean").is_none());
         assert!(json.get("original_iterations").is_none());
-        assert!(json.get("debias_smoothing_s").is_none());
-        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(json["debias_smoothing_s"], 0.05);
+        let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
+        assert_eq!(back.debias_smoothing_s, 0.05);
+        // A table saved before the low-pass existed was debiased without it.
+        let mut old = json;
+        old.as_object_mut().unwrap().remove("debias_smoothing_s");
+        let back: PhysicsConfig = serde_json::from_value(old).unwrap();
+        assert_eq!(back.debias_smoothing_s, 0.0);
+        let none = PhysicsConfig {
+            debias_smoothing_s: 0.0,
+            ..PhysicsConfig::default()
+        };
+        assert!(
+            serde_json::to_value(&none)
+                .unwrap()
+                .get("debias_smoothing_s")
+                .is_none()
+        );
         let off = PhysicsConfig {
             debias_restore_contacts: false,
             ..default
