@@ -831,6 +831,7 @@ mod tests {
         let config = TrainConfig {
             iterations: 1500,
             validation_fraction: 0.0,
+            smoothing_s: 0.0,
             ..tiny()
         };
         let (mut model, _) = train(&[(corrected.clone(), original)], &config).expect("train");
