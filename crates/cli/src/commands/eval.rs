@@ -510,6 +510,10 @@ struct PhysicsArgs {
     /// of this standard deviation, seconds (0: none).
     #[arg(long, default_value_t = PhysicsConfig::default().debias_smoothing_s)]
     debias_smoothing: f64,
+    /// Apply the debiasing network's change at this gain in [0, 1] instead
+    /// of the one its held-out pairs choose (an ablation).
+    #[arg(long)]
+    debias_gain: Option<f64>,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -616,6 +620,7 @@ impl TableArgs {
                 debias_restore_contacts: !p.debias_no_contacts,
                 debias_start_from_mean: p.debias_start_from_mean,
                 debias_smoothing_s: p.debias_smoothing,
+                debias_gain: p.debias_gain,
             },
             threads: usize::from(self.threads),
         }

@@ -92,6 +92,11 @@ pub struct PhysicsConfig {
     /// left out of the JSON, so they still merge with tables run with 0.
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub debias_smoothing_s: f64,
+    /// The debiaser's change applied at this gain instead of its held-out
+    /// choice ([`debias::TrainConfig::gain`], an ablation). Left out of the
+    /// config's JSON when unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub debias_gain: Option<f64>,
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -125,6 +130,7 @@ impl Default for PhysicsConfig {
             debias_restore_contacts: true,
             debias_start_from_mean: false,
             debias_smoothing_s: debias::TrainConfig::default().smoothing_s,
+            debias_gain: None,
         }
     }
 }
@@ -135,6 +141,19 @@ impl PhysicsConfig {
             return Err(EvalError::Config(
                 "the class tracker's time budget must be positive".into(),
             ));
+        }
+        if let Some(g) = self.debias_gain
+            && !(0.0..=1.0).contains(&g)
+        {
+            return Err(EvalError::Config(format!(
+                "the debiasing gain {g} is not in [0, 1]"
+            )));
+        }
+        if !(self.debias_smoothing_s.is_finite() && self.debias_smoothing_s >= 0.0) {
+            return Err(EvalError::Config(format!(
+                "the debiasing low-pass {} s is not a number >= 0",
+                self.debias_smoothing_s
+            )));
         }
         if self.original_iterations.is_some() && self.policy != pipeline::PolicyKind::Class {
             return Err(EvalError::Config(
@@ -538,6 +557,7 @@ pub fn correct_and_debias(
         },
         start_from_mean: config.debias_start_from_mean,
         smoothing_s: config.debias_smoothing_s,
+        gain: config.debias_gain,
         ..defaults
     };
     let plan = pipeline::corrections(
@@ -690,6 +710,7 @@ mod tests {
         assert!(json.get("debias_start_from_mean").is_none());
         assert!(json.get("original_iterations").is_none());
         assert_eq!(json["debias_smoothing_s"], 0.05);
+        assert!(json.get("debias_gain").is_none());
         let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
         assert_eq!(back.debias_smoothing_s, 0.05);
@@ -716,6 +737,29 @@ mod tests {
         assert_eq!(json["debias_restore_contacts"], false);
         let back: PhysicsConfig = serde_json::from_value(json).unwrap();
         assert!(!back.debias_restore_contacts);
+    }
+
+    #[test]
+    fn debiasing_gain_and_low_pass_are_checked() {
+        for bad in [
+            PhysicsConfig {
+                debias_gain: Some(1.5),
+                ..PhysicsConfig::default()
+            },
+            PhysicsConfig {
+                debias_smoothing_s: -1.0,
+                ..PhysicsConfig::default()
+            },
+        ] {
+            let e = bad.validate().expect_err("out of range").to_string();
+            assert!(e.contains("debiasing"), "{e}");
+        }
+        let half = PhysicsConfig {
+            debias_gain: Some(0.5),
+            ..PhysicsConfig::default()
+        };
+        half.validate().expect("gain in range");
+        assert_eq!(serde_json::to_value(&half).unwrap()["debias_gain"], 0.5);
     }
 
     #[test]
