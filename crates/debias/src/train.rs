@@ -752,14 +752,19 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_bias_that_holds_on_held_out_pairs_is_applied_at_full_strength() {
-        let pairs: Vec<_> = (0..5)
+    /// Five pairs: an original with its own arm noise, and it biased.
+    fn biased_jittered_pairs() -> Vec<(Motion, Motion)> {
+        (0..5)
             .map(|i| {
                 let original = jittered(&walk(), 100 + i);
                 (biased(&original), original)
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn a_bias_that_holds_on_held_out_pairs_is_applied_at_full_strength() {
+        let pairs = biased_jittered_pairs();
         let (model, report) = train(&pairs, &held_out_config()).expect("train");
         assert_eq!(report.validation_pairs, 2);
         let (zero, after) = (
@@ -869,12 +874,7 @@ mod tests {
 
     #[test]
     fn a_fixed_gain_replaces_the_held_out_one() {
-        let pairs: Vec<_> = (0..5)
-            .map(|i| {
-                let original = jittered(&walk(), 100 + i);
-                (biased(&original), original)
-            })
-            .collect();
+        let pairs = biased_jittered_pairs();
         let (corrected, original) = &pairs[0];
         let before = error(corrected, original);
         let at = |gain| {
