@@ -111,7 +111,7 @@ pub fn apply_rotations(motion: &Motion, rotations: &[f32]) -> Result<Motion, mot
 /// `rows` (`[frame][dim]`, clips of `lengths` frames one after the other)
 /// low-passed over time, clip by clip and column by column, with a Gaussian
 /// of `sigma` frames (window +-3 sigma, cut at each clip's ends with the
-/// weights renormalised, as in [`motion::smooth::gaussian`]). `sigma` below
+/// weights renormalised: [`motion::smooth::GaussianWindow`]). `sigma` below
 /// 1e-3 frames returns the rows unchanged.
 ///
 /// Why it exists: the network predicts each frame's change from that frame
@@ -124,25 +124,19 @@ pub fn low_pass(rows: &[f32], dim: usize, lengths: &[usize], sigma: f64) -> Vec<
     if sigma.is_nan() || sigma < 1e-3 || dim == 0 {
         return rows.to_vec();
     }
-    // Past the longest clip a wider window only adds weights of absent frames.
     let longest = lengths.iter().copied().max().unwrap_or(0);
-    let half = (3.0 * sigma).ceil().min(longest as f64) as isize;
-    let weights: Vec<f64> = (-half..=half)
-        .map(|k| (-(k as f64).powi(2) / (2.0 * sigma * sigma)).exp())
-        .collect();
+    let window = motion::smooth::GaussianWindow::new(sigma, longest);
     let mut out = vec![0.0f32; rows.len()];
+    let mut acc = vec![0.0f64; dim];
     let mut start = 0usize;
     for &n in lengths {
         let clip = &rows[start * dim..(start + n) * dim];
         let smoothed = &mut out[start * dim..(start + n) * dim];
         for t in 0..n {
-            let (mut acc, mut total) = (vec![0.0f64; dim], 0.0f64);
-            for (k, w) in (-half..=half).zip(&weights) {
-                let s = t as isize + k;
-                if !(0..n as isize).contains(&s) {
-                    continue;
-                }
-                let row = &clip[s as usize * dim..(s as usize + 1) * dim];
+            acc.fill(0.0);
+            let mut total = 0.0f64;
+            for (s, w) in window.taps(t, n) {
+                let row = &clip[s * dim..(s + 1) * dim];
                 for (a, x) in acc.iter_mut().zip(row) {
                     *a += w * *x as f64;
                 }

@@ -71,7 +71,8 @@ pub struct TrainConfig {
     /// Apply the change at this gain instead of the held-out least-squares
     /// one (an ablation: how the cost or gain of debiasing scales with how
     /// far it moves a clip). `None`: the held-out choice (1 without pairs
-    /// held out).
+    /// held out). The step count and the report's held-out losses stay the
+    /// held-out check's (at its own least-squares gain).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gain: Option<f64>,
 }

@@ -16,6 +16,36 @@ use glam::{DQuat, DVec3};
 use crate::Motion;
 use crate::error::MotionError;
 
+/// A Gaussian window of `sigma` frames (+-3 sigma) for clips of at most
+/// `longest` frames, cut at each clip's ends: what [`gaussian`] and other
+/// per-frame low-passes (the debiaser's change) average over.
+pub struct GaussianWindow {
+    half: isize,
+    weights: Vec<f64>,
+}
+
+impl GaussianWindow {
+    pub fn new(sigma: f64, longest: usize) -> GaussianWindow {
+        // Past the longest clip a wider window only adds weights of absent frames.
+        let half = (3.0 * sigma).ceil().min(longest as f64) as isize;
+        let weights = (-half..=half)
+            .map(|k| (-(k as f64).powi(2) / (2.0 * sigma * sigma)).exp())
+            .collect();
+        GaussianWindow { half, weights }
+    }
+
+    /// The frames around frame `t` of a clip of `frames` frames that exist,
+    /// with their weights (not normalised: divide by their sum).
+    pub fn taps(&self, t: usize, frames: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (-self.half..=self.half)
+            .zip(&self.weights)
+            .filter_map(move |(k, &w)| {
+                let s = t as isize + k;
+                (0..frames as isize).contains(&s).then_some((s as usize, w))
+            })
+    }
+}
+
 /// `motion` low-passed with a Gaussian of standard deviation `sigma_s`
 /// seconds (window +-3 sigma). `sigma_s` = 0 returns the clip unchanged.
 pub fn gaussian(motion: &Motion, sigma_s: f64) -> Result<Motion, MotionError> {
@@ -30,17 +60,8 @@ pub fn gaussian(motion: &Motion, sigma_s: f64) -> Result<Motion, MotionError> {
     if sigma < 1e-3 || n < 2 {
         return Ok(out);
     }
-    // Past the clip's length a wider window only adds weights of absent frames.
-    let half = (3.0 * sigma).ceil().min(n as f64) as isize;
-    let weights: Vec<f64> = (-half..=half)
-        .map(|k| (-(k as f64).powi(2) / (2.0 * sigma * sigma)).exp())
-        .collect();
-    let window = |t: usize| {
-        (-half..=half).zip(&weights).filter_map(move |(k, &w)| {
-            let s = t as isize + k;
-            (0..n as isize).contains(&s).then_some((s as usize, w))
-        })
-    };
+    let gaussian = GaussianWindow::new(sigma, n);
+    let window = |t: usize| gaussian.taps(t, n);
     for t in 0..n {
         let (mut sum, mut total) = (DVec3::ZERO, 0.0);
         for (s, w) in window(t) {

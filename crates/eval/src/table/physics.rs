@@ -142,19 +142,9 @@ impl PhysicsConfig {
                 "the class tracker's time budget must be positive".into(),
             ));
         }
-        if let Some(g) = self.debias_gain
-            && !(0.0..=1.0).contains(&g)
-        {
-            return Err(EvalError::Config(format!(
-                "the debiasing gain {g} is not in [0, 1]"
-            )));
-        }
-        if !(self.debias_smoothing_s.is_finite() && self.debias_smoothing_s >= 0.0) {
-            return Err(EvalError::Config(format!(
-                "the debiasing low-pass {} s is not a number >= 0",
-                self.debias_smoothing_s
-            )));
-        }
+        debias_config(self)
+            .validate()
+            .map_err(|e| EvalError::Config(format!("debiasing: {e}")))?;
         if self.original_iterations.is_some() && self.policy != pipeline::PolicyKind::Class {
             return Err(EvalError::Config(
                 "the training clips' own iterations (original iterations) need the class policy"
@@ -548,18 +538,7 @@ pub fn correct_and_debias(
     // when the IK edits joined).
     let seeds = seeds_in_order(original_names.iter().chain(&sample_names));
     let step = correct_step(config);
-    let defaults = debias::TrainConfig::default();
-    let debias = debias::TrainConfig {
-        iterations: config.debias_iterations,
-        contacts: debias::ContactConfig {
-            restore: config.debias_restore_contacts,
-            ..defaults.contacts
-        },
-        start_from_mean: config.debias_start_from_mean,
-        smoothing_s: config.debias_smoothing_s,
-        gain: config.debias_gain,
-        ..defaults
-    };
+    let debias = debias_config(config);
     let plan = pipeline::corrections(
         &original_names,
         &sample_names,
@@ -667,6 +646,22 @@ pub fn correct_and_debias(
         sets: corrected_sets,
         summary,
     })
+}
+
+/// The debiaser's settings: the debias crate's defaults with the table's.
+fn debias_config(config: &PhysicsConfig) -> debias::TrainConfig {
+    let defaults = debias::TrainConfig::default();
+    debias::TrainConfig {
+        iterations: config.debias_iterations,
+        contacts: debias::ContactConfig {
+            restore: config.debias_restore_contacts,
+            ..defaults.contacts
+        },
+        start_from_mean: config.debias_start_from_mean,
+        smoothing_s: config.debias_smoothing_s,
+        gain: config.debias_gain,
+        ..defaults
+    }
 }
 
 /// Which original's policy the samples start from (the executor's choice:
