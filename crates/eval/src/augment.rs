@@ -68,7 +68,7 @@ impl Augmentation {
                 recipe, seed, work, ..
             } => apply_recipe(recipe, *seed, work.as_deref(), train, log),
             Augmentation::Vae(v) => {
-                let model = train_vae(train, v.iterations, v.adversarial_weight, v.seed, log)?;
+                let model = train_vae(train, v.iterations, v.adversarial_weight, 0.0, v.seed, log)?;
                 let finish = vae::Finish::default();
                 sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed, &finish)
             }
@@ -147,10 +147,13 @@ pub fn apply_recipe(
 }
 
 /// Trains the motion VAE on the training clips (deterministic for a seed).
+/// `mixed_motion_weight`: `vae::LossWeights::mixed_motion` (0: off, the vae
+/// crate's default).
 pub fn train_vae(
     train: &[(String, Motion)],
     iterations: u64,
     adversarial_weight: Option<f64>,
+    mixed_motion_weight: f64,
     seed: u64,
     log: Log,
 ) -> Result<TrainedVae> {
@@ -160,6 +163,7 @@ pub fn train_vae(
         seed,
         ..VaeTrainConfig::default()
     };
+    config.weights.mixed_motion = mixed_motion_weight;
     if let Some(w) = adversarial_weight {
         if w == 0.0 {
             config.adversarial = false;
@@ -168,11 +172,12 @@ pub fn train_vae(
         }
     }
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {})",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}",
         clips.len(),
         config.iterations,
         config.adversarial,
-        config.weights.adversarial
+        config.weights.adversarial,
+        config.weights.mixed_motion
     ));
     let every = (config.iterations / 5).max(1);
     let model = vae::train(&clips, &config, |p| {
@@ -198,13 +203,21 @@ pub fn cached_vae(
     train: &[(String, Motion)],
     iterations: u64,
     adversarial_weight: Option<f64>,
+    mixed_motion_weight: f64,
     log: Log,
 ) -> Result<TrainedVae> {
     if dir.join(vae::trained::META_FILE).is_file() {
         log(&format!("vae: reusing {}", dir.display()));
         return Ok(TrainedVae::load(dir)?);
     }
-    let model = train_vae(train, iterations, adversarial_weight, 0, log)?;
+    let model = train_vae(
+        train,
+        iterations,
+        adversarial_weight,
+        mixed_motion_weight,
+        0,
+        log,
+    )?;
     model.save(dir)?;
     Ok(model)
 }

@@ -557,6 +557,11 @@ struct TableArgs {
     /// clips).
     #[arg(long)]
     vae_near_members: Option<usize>,
+    /// Weight of the VAE's pose-speed term on mixed codes (0 = off): keeps
+    /// near samples of fast classes (jog) from standing frozen
+    /// (crates/vae/README.md, session 18; crates/eval/README.md, jog).
+    #[arg(long, default_value_t = TableConfig::default().vae_mixed_motion_weight)]
+    vae_mixed_motion_weight: f64,
     /// Low-pass each VAE sample (Gaussian, seconds; 0 = as decoded) before
     /// its root is planted: decoded clips jitter (crates/vae/README.md).
     #[arg(long, default_value_t = TableConfig::default().vae_smooth_s)]
@@ -598,6 +603,7 @@ impl TableArgs {
             vae_iterations: self.vae_iterations,
             vae_ablation: self.vae_ablation,
             vae_near_members: self.vae_near_members,
+            vae_mixed_motion_weight: self.vae_mixed_motion_weight,
             vae_smooth_s: self.vae_smooth_s,
             predict: !self.no_predict,
             sets: self.sets.clone(),

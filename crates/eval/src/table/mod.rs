@@ -137,6 +137,12 @@ pub struct TableConfig {
     /// Draw near codes between this many training clips of a cluster instead
     /// of the VAE's own (the paper's 2; see the vae crate's README).
     pub vae_near_members: Option<usize>,
+    /// Weight of the VAE's pose-speed term on mixed codes
+    /// (`vae::LossWeights::mixed_motion`; 0: off, the vae crate's default).
+    /// Near samples of a class whose clips move fast (jog) otherwise stand
+    /// nearly frozen, and the correction rejects them (crates/eval/README.md,
+    /// jog).
+    pub vae_mixed_motion_weight: f64,
     /// Low-pass each VAE sample with a Gaussian of this many seconds before
     /// its root is planted (0: as decoded; `vae::Finish`).
     pub vae_smooth_s: f64,
@@ -168,6 +174,7 @@ impl Default for TableConfig {
             vae_iterations: 1500,
             vae_ablation: false,
             vae_near_members: None,
+            vae_mixed_motion_weight: 0.0,
             vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
@@ -211,6 +218,9 @@ impl TableConfig {
         }
         if !(self.vae_smooth_s.is_finite() && (0.0..=1.0).contains(&self.vae_smooth_s)) {
             return config("the VAE samples' smoothing must be 0-1 s");
+        }
+        if !(self.vae_mixed_motion_weight.is_finite() && self.vae_mixed_motion_weight >= 0.0) {
+            return config("the VAE's mixed-motion weight must be 0 or more");
         }
         self.physics.validate()
     }
@@ -478,8 +488,18 @@ fn made_sets(
     let finish = vae::Finish::new(config.vae_smooth_s, true);
     for (tag, weight) in vae_runs {
         let t = Instant::now();
-        let cache = work.join(format!("{tag}-{}it", config.vae_iterations));
-        let mut model = cached_vae(&cache, &split.train, config.vae_iterations, weight, log)?;
+        let mut cache_name = format!("{tag}-{}it", config.vae_iterations);
+        if config.vae_mixed_motion_weight > 0.0 {
+            cache_name.push_str(&format!("-mixed-motion-{}", config.vae_mixed_motion_weight));
+        }
+        let mut model = cached_vae(
+            &work.join(cache_name),
+            &split.train,
+            config.vae_iterations,
+            weight,
+            config.vae_mixed_motion_weight,
+            log,
+        )?;
         if let Some(members) = config.vae_near_members {
             model = model.with_near_members(members)?;
         }

@@ -43,6 +43,14 @@ impl TableConfig {
         if let (Some(n), Some(map)) = (c.vae_near_members, v.as_object_mut()) {
             map.insert("vae_near_members".into(), json!(n));
         }
+        if let Some(map) = v.as_object_mut()
+            && c.vae_mixed_motion_weight > 0.0
+        {
+            map.insert(
+                "vae_mixed_motion_weight".into(),
+                json!(c.vae_mixed_motion_weight),
+            );
+        }
         v
     }
 
@@ -783,5 +791,21 @@ mod tests {
         assert!(v["config"]["physics"].is_null());
         assert!(v["config"].get("data").is_none());
         assert_eq!(v["cells"][0]["physics"]["samples"], 4);
+    }
+
+    #[test]
+    fn the_vae_mixed_motion_weight_is_recorded_only_when_on() {
+        let mut t = table();
+        let off = t.config.cell_key();
+        // Off: left out, so tables saved before it existed still resume and merge.
+        assert!(off.get("vae_mixed_motion_weight").is_none(), "{off}");
+        t.config.vae_mixed_motion_weight = 1.0;
+        let on = t.config.cell_key();
+        assert_eq!(on["vae_mixed_motion_weight"], 1.0);
+        assert_ne!(
+            on, off,
+            "a cell made without the term is not reused with it"
+        );
+        assert_eq!(saved(&t).config["vae_mixed_motion_weight"], 1.0);
     }
 }
