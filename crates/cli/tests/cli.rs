@@ -558,6 +558,40 @@ fn bench_correction_corrects_variants_from_the_class_tracker_or_a_second_one() {
         assert_eq!(second["clips"], 1);
         assert_eq!(second["iterations"], 1);
     }
+
+    // One clip corrected from the class tracker with `correct --tracker`;
+    // its checkpoints given as a plain warm start are refused with a hint
+    // (the tracker's policy sees upcoming frames a per-clip one does not).
+    let tracker = out.join("kick_tracker");
+    let one = dir.path().join("one");
+    let correct = |from: &[&str]| {
+        let mut args = vec![
+            "correct",
+            variant.to_str().unwrap(),
+            "--out",
+            one.to_str().unwrap(),
+            "--max-iterations",
+            "1",
+            "--envs",
+            "2",
+            "--threads",
+            "1",
+        ];
+        args.extend_from_slice(from);
+        motionaug(&args)
+    };
+    let checkpoints = tracker.join("checkpoints");
+    let err = failed(correct(&["--warm-start", checkpoints.to_str().unwrap()]));
+    assert!(err.contains("--tracker"), "{err}");
+    ok(correct(&["--tracker", tracker.to_str().unwrap()]));
+    let report = read(one.join("report.json"));
+    assert!(
+        report["warm_start"]
+            .as_str()
+            .unwrap()
+            .contains("kick_tracker"),
+        "{report}"
+    );
 }
 
 /// HDM05 clips of all five actors (not bundled; the eval tests skip without it).

@@ -69,8 +69,16 @@ pub struct Args {
     seed: u64,
     /// Start from another correction's checkpoints (its `DIR/checkpoints`), e.g.
     /// the source clip's for a synthesised variant of it.
-    #[arg(long, value_name = "CHECKPOINTS")]
+    #[arg(long, value_name = "CHECKPOINTS", conflicts_with = "tracker")]
     warm_start: Option<PathBuf>,
+    /// Start from a class tracker: a folder with `class.json` and
+    /// `checkpoints/` (`bench correction`'s `<class>_tracker`, the eval
+    /// table's and the pipeline's class trackers). The correction then sees
+    /// the upcoming reference frames the tracker was trained with and keeps
+    /// its residual gains (`--residual-final-scale` and
+    /// `--residual-anneal-iterations` do not apply).
+    #[arg(long, value_name = "DIR")]
+    tracker: Option<PathBuf>,
     /// Keep the rest-pose foot boxes instead of building them in the standing
     /// foot's frame (an ablation).
     #[arg(long)]
@@ -108,12 +116,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.physics.skate_scale_m_s = args.skate_scale;
     config.skate_scale_when_skating_m_s = args.skate_scale_when_skating;
     config.warm_start = args.warm_start.clone();
+    if let Some(from) = &args.warm_start
+        && let Some(class_dir) = from.parent()
+        && class_dir.join(correct::class::REPORT_FILE).is_file()
+    {
+        anyhow::bail!(
+            "{} holds a class tracker's checkpoints, whose policy sees upcoming reference \
+             frames: start from it with --tracker {}",
+            from.display(),
+            class_dir.display()
+        );
+    }
     config.physics.character.calibrate_feet = !args.rest_feet;
     config.physics.plant_reference = args.plant_reference;
     if args.keep_clip_height {
         config.physics.output_frame = physics::OutputFrame::Clip;
     }
     config.ppo.threads = args.threads;
+    if let Some(dir) = &args.tracker {
+        let report = correct::ClassReport::read(&dir.join(correct::class::REPORT_FILE))
+            .with_context(|| format!("{} is not a class tracker folder", dir.display()))?;
+        config = report.warm_config(&config, dir);
+    }
     let terminal = std::io::stderr().is_terminal();
     // The input beside the output, for `motionaug view DIR` to play both.
     std::fs::create_dir_all(&args.out)?;
