@@ -577,6 +577,11 @@ struct TableArgs {
     sets: Vec<SetKind>,
     #[command(flatten)]
     physics: PhysicsArgs,
+    /// Also train on each corrected subset's accepted clips as made (`_kept`
+    /// rows), to tell what rejecting clips did from what correcting the rest
+    /// did.
+    #[arg(long)]
+    kept_rows: bool,
     /// Folder for the trained VAEs and the corrections (default: OUT/work); a
     /// rerun reuses them and resumes interrupted corrections.
     #[arg(long)]
@@ -628,6 +633,7 @@ impl TableArgs {
                 debias_smoothing_s: p.debias_smoothing,
                 debias_gain: p.debias_gain,
             },
+            kept_rows: self.kept_rows,
             threads: usize::from(self.threads),
         }
     }

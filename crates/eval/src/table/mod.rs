@@ -93,19 +93,24 @@ impl std::fmt::Display for SetKind {
 
 /// Conditions of the prediction tables, in order (sets not made are skipped):
 /// the synthesised sets as made, then the corrected subsets as made
-/// (`_sub`), physically corrected (`_corrected`) and debiased (`_debiased`).
-pub const PREDICT_CONDITIONS: [&str; 13] = [
+/// (`_sub`), the clips of it the correction accepted, as made (`_kept`, with
+/// [`TableConfig::kept_rows`]), physically corrected (`_corrected`) and
+/// debiased (`_debiased`).
+pub const PREDICT_CONDITIONS: [&str; 16] = [
     "noise",
     "ik",
     "vae_near",
     "vae_ik",
     "ik_sub",
+    "ik_kept",
     "ik_corrected",
     "ik_debiased",
     "vae_sub",
+    "vae_kept",
     "vae_corrected",
     "vae_debiased",
     "vae_ik_sub",
+    "vae_ik_kept",
     "vae_ik_corrected",
     "vae_ik_debiased",
 ];
@@ -150,6 +155,11 @@ pub struct TableConfig {
     pub predict: bool,
     pub sets: Vec<SetKind>,
     pub physics: PhysicsConfig,
+    /// Also train on the corrected subsets' accepted clips as made (`_kept`
+    /// rows): `_corrected` keeps only accepted clips, so `_corrected - _sub`
+    /// mixes what rejecting clips did with what correcting the rest did;
+    /// `_kept - _sub` and `_corrected - _kept` tell them apart.
+    pub kept_rows: bool,
     /// Cores the table uses: corrections that need nothing from each other,
     /// and the prediction models of a cell, run this many at a time. Each
     /// has its own seeds and runs on one thread (the class trackers too), so
@@ -179,6 +189,7 @@ impl Default for TableConfig {
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
+            kept_rows: false,
             threads: 1,
         }
     }
@@ -196,6 +207,9 @@ impl TableConfig {
             ));
         }
         let config = |m: &str| Err(EvalError::Config(m.into()));
+        if self.kept_rows && !self.has(SetKind::Physics) {
+            return config("the kept rows are the physics set's accepted clips: add physics");
+        }
         if self.data.as_os_str().is_empty() {
             return config("no data folder");
         }
@@ -551,13 +565,29 @@ fn correct_sets(
     )?;
     for set in p.sets {
         let row = set.row;
+        if config.kept_rows {
+            let accepted: std::collections::HashSet<&str> =
+                set.corrected.iter().map(|(n, _)| n.as_str()).collect();
+            let kept = set
+                .subset
+                .iter()
+                .filter(|(n, _)| accepted.contains(n.as_str()))
+                .cloned()
+                .collect();
+            sets.push((format!("{row}_kept"), kept));
+        }
         sets.push((format!("{row}_sub"), set.subset));
         sets.push((format!("{row}_corrected"), set.corrected));
         sets.push((format!("{row}_debiased"), set.debiased));
     }
     cell.physics = Some(p.summary);
     if config.has(SetKind::VaeIk) {
-        for stage in ["sub", "corrected", "debiased"] {
+        let stages: &[&str] = if config.kept_rows {
+            &["sub", "kept", "corrected", "debiased"]
+        } else {
+            &["sub", "corrected", "debiased"]
+        };
+        for stage in stages {
             let union = union_of(sets, &format!("vae_{stage}"), &format!("ik_{stage}"));
             sets.push((format!("vae_ik_{stage}"), time_warped(&union)?));
         }
@@ -686,6 +716,12 @@ mod tests {
         assert!(c.validate().is_ok());
         c.sets = vec![SetKind::Noise, SetKind::Physics];
         assert!(matches!(c.validate(), Err(EvalError::PhysicsNeedsVae)));
+        // The kept rows are the physics set's.
+        c.kept_rows = true;
+        c.sets = vec![SetKind::Ik];
+        assert!(matches!(c.validate(), Err(EvalError::Config(m)) if m.contains("kept rows")));
+        c.sets.push(SetKind::Physics);
+        assert!(c.validate().is_ok());
     }
 
     /// A two-joint clip of `frames` frames swinging at `speed`.

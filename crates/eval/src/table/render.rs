@@ -44,6 +44,11 @@ impl TableConfig {
             map.insert("vae_near_members".into(), json!(n));
         }
         if let Some(map) = v.as_object_mut()
+            && c.kept_rows
+        {
+            map.insert("kept_rows".into(), json!(true));
+        }
+        if let Some(map) = v.as_object_mut()
             && c.vae_mixed_motion_weight > 0.0
         {
             map.insert(
@@ -417,6 +422,34 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
         paired_row(md, &format!("{a} - {b}"), &by_class, m, a, b);
     }
     md.push('\n');
+
+    // With the kept rows: rejecting clips and correcting the rest, apart.
+    let apart: Vec<(String, String)> = ["ik", "vae", "vae_ik"]
+        .into_iter()
+        .flat_map(|stem| {
+            [
+                (format!("{stem}_kept"), format!("{stem}_sub")),
+                (format!("{stem}_corrected"), format!("{stem}_kept")),
+            ]
+        })
+        .filter(|(a, b)| made(a) && made(b))
+        .collect();
+    if apart.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "What rejection and correction each did: the accepted clips as made (`_kept`) minus all of them (`_sub`), and the accepted clips corrected minus as made; * as above:\n"
+    );
+    header_row(
+        md,
+        "row",
+        by_class.iter().map(|(class, _)| class.to_string()),
+    );
+    for (a, b) in &apart {
+        paired_row(md, &format!("{a} - {b}"), &by_class, m, a, b);
+    }
+    md.push('\n');
 }
 
 /// One row of a paired-difference table: condition `a` minus `b` per class
@@ -778,6 +811,53 @@ mod tests {
         );
         // No IK rows were made: no IK line.
         assert!(!md.contains("ik_corrected - ik_sub"), "{md}");
+        // No kept rows: no section telling rejection and correction apart.
+        assert!(
+            !md.contains("What rejection and correction each did"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn kept_rows_tell_rejection_from_correction() {
+        // Rejecting clips costs +0.3 in both runs; correcting the accepted
+        // ones gains 0.1 in both: together +0.2 against all of them as made.
+        let cell = gcn_cell(
+            "bd",
+            vec![
+                ("no_aug", seeds(2.0, 2.2)),
+                ("vae_sub", seeds(1.0, 1.2)),
+                ("vae_kept", seeds(1.3, 1.5)),
+                ("vae_corrected", seeds(1.2, 1.4)),
+                ("vae_debiased", seeds(1.2, 1.4)),
+            ],
+        );
+        let mut t = table();
+        t.config.train.seeds = vec![0, 1];
+        t.config.models = vec![ModelKind::Gcn];
+        t.config.kept_rows = true;
+        t.cells = vec![cell];
+        let md = t.to_markdown();
+        assert!(md.contains("| vae_kept | 1.400 +- 0.141 /"), "{md}");
+        assert!(
+            md.contains("What rejection and correction each did"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| vae_kept - vae_sub | +0.300 +- 0.000* /"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| vae_corrected - vae_kept | -0.100 +- 0.000* /"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| vae_corrected - vae_sub | +0.200 +- 0.000* /"),
+            "{md}"
+        );
+        assert_eq!(t.config.cell_key()["kept_rows"], true);
+        t.config.kept_rows = false;
+        assert!(t.config.cell_key().get("kept_rows").is_none());
     }
 
     #[test]
