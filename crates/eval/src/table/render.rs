@@ -398,56 +398,53 @@ fn aggregate_tables(md: &mut String, m: &str, all: &[TableCell]) {
 
     // What correction and debiasing did to each set: against the same clips
     // uncorrected (`_sub`), paired the same way.
-    let effects: Vec<(String, String)> = ["ik", "vae", "vae_ik"]
-        .into_iter()
-        .flat_map(|stem| {
-            ["corrected", "debiased"]
-                .map(|stage| (format!("{stem}_{stage}"), format!("{stem}_sub")))
-        })
-        .filter(|(a, b)| made(a) && made(b))
-        .collect();
-    if effects.is_empty() {
-        return;
-    }
-    let _ = writeln!(
-        md,
-        "Paired differences, each corrected or debiased set minus the same clips uncorrected (`_sub`), over the same runs; * as above:\n"
-    );
-    header_row(
-        md,
-        "row",
-        by_class.iter().map(|(class, _)| class.to_string()),
-    );
-    for (a, b) in &effects {
-        paired_row(md, &format!("{a} - {b}"), &by_class, m, a, b);
-    }
-    md.push('\n');
+    let effects = stage_pairs(|stem| {
+        ["corrected", "debiased"].map(|stage| (format!("{stem}_{stage}"), format!("{stem}_sub")))
+    });
+    let heading = "Paired differences, each corrected or debiased set minus the same clips uncorrected (`_sub`), over the same runs; * as above:";
+    pairs_section(md, heading, &effects, &by_class, m, &made);
 
     // With the kept rows: rejecting clips and correcting the rest, apart.
-    let apart: Vec<(String, String)> = ["ik", "vae", "vae_ik"]
+    let apart = stage_pairs(|stem| {
+        [
+            (format!("{stem}_kept"), format!("{stem}_sub")),
+            (format!("{stem}_corrected"), format!("{stem}_kept")),
+        ]
+    });
+    let heading = "What rejection and correction each did: the accepted clips as made (`_kept`) minus all of them (`_sub`), and the accepted clips corrected minus as made; * as above:";
+    pairs_section(md, heading, &apart, &by_class, m, &made);
+}
+
+/// `(a, b)` pairs of rows for each corrected set (IK edits, VAE samples, both).
+fn stage_pairs(pairs: impl Fn(&str) -> [(String, String); 2]) -> Vec<(String, String)> {
+    ["ik", "vae", "vae_ik"]
         .into_iter()
-        .flat_map(|stem| {
-            [
-                (format!("{stem}_kept"), format!("{stem}_sub")),
-                (format!("{stem}_corrected"), format!("{stem}_kept")),
-            ]
-        })
-        .filter(|(a, b)| made(a) && made(b))
-        .collect();
-    if apart.is_empty() {
+        .flat_map(pairs)
+        .collect()
+}
+
+/// A table of `a - b` paired differences under `heading`, one line per pair
+/// whose rows were both made (nothing when none was).
+fn pairs_section(
+    md: &mut String,
+    heading: &str,
+    pairs: &[(String, String)],
+    by_class: &[(&str, Vec<&TableCell>)],
+    m: &str,
+    made: &dyn Fn(&str) -> bool,
+) {
+    let pairs: Vec<&(String, String)> = pairs.iter().filter(|(a, b)| made(a) && made(b)).collect();
+    if pairs.is_empty() {
         return;
     }
-    let _ = writeln!(
-        md,
-        "What rejection and correction each did: the accepted clips as made (`_kept`) minus all of them (`_sub`), and the accepted clips corrected minus as made; * as above:\n"
-    );
+    let _ = writeln!(md, "{heading}\n");
     header_row(
         md,
         "row",
         by_class.iter().map(|(class, _)| class.to_string()),
     );
-    for (a, b) in &apart {
-        paired_row(md, &format!("{a} - {b}"), &by_class, m, a, b);
+    for (a, b) in pairs {
+        paired_row(md, &format!("{a} - {b}"), by_class, m, a, b);
     }
     md.push('\n');
 }
