@@ -779,23 +779,27 @@ mod tests {
         assert!(err.contains("computed differently (iterations)"), "{err}");
     }
 
+    /// A GCN-only table of actor bd and two seeds: no augmentation at 2.0 /
+    /// 2.2, and `rows`.
+    fn gcn_two_seed_table(rows: Vec<(&str, ConditionResult)>) -> Table {
+        let mut all = vec![("no_aug", seeds(2.0, 2.2))];
+        all.extend(rows);
+        let mut t = table();
+        t.config.train.seeds = vec![0, 1];
+        t.config.models = vec![ModelKind::Gcn];
+        t.cells = vec![gcn_cell("bd", all)];
+        t
+    }
+
     #[test]
     fn corrected_and_debiased_sets_are_paired_with_the_same_clips_uncorrected() {
         // One actor, two seeds: corrected 0.2 below the uncorrected clips in
         // both runs, debiased +0.1 and -0.1 (no consistent sign).
-        let cell = gcn_cell(
-            "bd",
-            vec![
-                ("no_aug", seeds(2.0, 2.2)),
-                ("vae_sub", seeds(1.0, 1.2)),
-                ("vae_corrected", seeds(0.8, 1.0)),
-                ("vae_debiased", seeds(1.1, 1.1)),
-            ],
-        );
-        let mut t = table();
-        t.config.train.seeds = vec![0, 1];
-        t.config.models = vec![ModelKind::Gcn];
-        t.cells = vec![cell];
+        let t = gcn_two_seed_table(vec![
+            ("vae_sub", seeds(1.0, 1.2)),
+            ("vae_corrected", seeds(0.8, 1.0)),
+            ("vae_debiased", seeds(1.1, 1.1)),
+        ]);
         let md = t.to_markdown();
         assert!(md.contains("minus the same clips uncorrected"), "{md}");
         assert!(
@@ -819,39 +823,23 @@ mod tests {
     fn kept_rows_tell_rejection_from_correction() {
         // Rejecting clips costs +0.3 in both runs; correcting the accepted
         // ones gains 0.1 in both: together +0.2 against all of them as made.
-        let cell = gcn_cell(
-            "bd",
-            vec![
-                ("no_aug", seeds(2.0, 2.2)),
-                ("vae_sub", seeds(1.0, 1.2)),
-                ("vae_kept", seeds(1.3, 1.5)),
-                ("vae_corrected", seeds(1.2, 1.4)),
-                ("vae_debiased", seeds(1.2, 1.4)),
-            ],
-        );
-        let mut t = table();
-        t.config.train.seeds = vec![0, 1];
-        t.config.models = vec![ModelKind::Gcn];
+        let mut t = gcn_two_seed_table(vec![
+            ("vae_sub", seeds(1.0, 1.2)),
+            ("vae_kept", seeds(1.3, 1.5)),
+            ("vae_corrected", seeds(1.2, 1.4)),
+            ("vae_debiased", seeds(1.2, 1.4)),
+        ]);
         t.config.kept_rows = true;
-        t.cells = vec![cell];
         let md = t.to_markdown();
-        assert!(md.contains("| vae_kept | 1.400 +- 0.141 /"), "{md}");
-        assert!(
-            md.contains("What rejection and correction each did"),
-            "{md}"
-        );
-        assert!(
-            md.contains("| vae_kept - vae_sub | +0.300 +- 0.000* /"),
-            "{md}"
-        );
-        assert!(
-            md.contains("| vae_corrected - vae_kept | -0.100 +- 0.000* /"),
-            "{md}"
-        );
-        assert!(
-            md.contains("| vae_corrected - vae_sub | +0.200 +- 0.000* /"),
-            "{md}"
-        );
+        for line in [
+            "| vae_kept | 1.400 +- 0.141 /",
+            "What rejection and correction each did",
+            "| vae_kept - vae_sub | +0.300 +- 0.000* /",
+            "| vae_corrected - vae_kept | -0.100 +- 0.000* /",
+            "| vae_corrected - vae_sub | +0.200 +- 0.000* /",
+        ] {
+            assert!(md.contains(line), "{line} in\n{md}");
+        }
         assert_eq!(t.config.cell_key()["kept_rows"], true);
         t.config.kept_rows = false;
         assert!(t.config.cell_key().get("kept_rows").is_none());
