@@ -582,11 +582,9 @@ fn correct_sets(
     }
     cell.physics = Some(p.summary);
     if config.has(SetKind::VaeIk) {
-        let stages: &[&str] = if config.kept_rows {
-            &["sub", "kept", "corrected", "debiased"]
-        } else {
-            &["sub", "corrected", "debiased"]
-        };
+        let stages = ["sub", "kept", "corrected", "debiased"]
+            .into_iter()
+            .filter(|stage| *stage != "kept" || config.kept_rows);
         for stage in stages {
             let union = union_of(sets, &format!("vae_{stage}"), &format!("ik_{stage}"));
             sets.push((format!("vae_ik_{stage}"), time_warped(&union)?));

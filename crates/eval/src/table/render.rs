@@ -39,22 +39,21 @@ impl TableConfig {
             "sets": c.sets,
             "physics": c.sets.contains(&SetKind::Physics).then_some(&c.physics),
         });
-        // Only when set, so that tables saved before it existed still resume.
-        if let (Some(n), Some(map)) = (c.vae_near_members, v.as_object_mut()) {
-            map.insert("vae_near_members".into(), json!(n));
-        }
-        if let Some(map) = v.as_object_mut()
-            && c.kept_rows
-        {
-            map.insert("kept_rows".into(), json!(true));
-        }
-        if let Some(map) = v.as_object_mut()
-            && c.vae_mixed_motion_weight > 0.0
-        {
-            map.insert(
-                "vae_mixed_motion_weight".into(),
-                json!(c.vae_mixed_motion_weight),
-            );
+        // Only when set, so that tables saved before each existed still
+        // resume and merge.
+        if let Some(map) = v.as_object_mut() {
+            if let Some(n) = c.vae_near_members {
+                map.insert("vae_near_members".into(), json!(n));
+            }
+            if c.vae_mixed_motion_weight > 0.0 {
+                map.insert(
+                    "vae_mixed_motion_weight".into(),
+                    json!(c.vae_mixed_motion_weight),
+                );
+            }
+            if c.kept_rows {
+                map.insert("kept_rows".into(), json!(true));
+            }
         }
         v
     }
