@@ -9,6 +9,8 @@
 //! * [`physics`]: the physically corrected and debiased rows, through the
 //!   pipeline's one executor.
 //! * `render`: table.json and table.md.
+//! * `paper`: the MotionAug paper's Tables 2-5, which table.md reads the full
+//!   method beside.
 //! * [`merge`]: tables of separate runs (folds) merged into one, from their
 //!   table.json files.
 //!
@@ -16,6 +18,7 @@
 //! rerun reuses them and resumes interrupted corrections.
 
 mod merge;
+mod paper;
 pub mod physics;
 mod render;
 
