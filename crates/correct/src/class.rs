@@ -123,14 +123,17 @@ impl ClassReport {
 
     /// The settings of one clip's correction that starts from the tracker in
     /// `class_dir`: its observation, its checkpoint, and the residual gains it
-    /// was trained at (held there: the tracker already learnt that balance).
+    /// was trained at (held there: the tracker already learnt that balance;
+    /// or lowered from there to `base.tracker_final_residual_scale`).
     pub fn warm_config(&self, base: &CorrectConfig, class_dir: &Path) -> CorrectConfig {
         let mut config = base.clone();
         config.physics.tracker_frames = self.tracker_frames;
         config.warm_start = Some(class_dir.join("checkpoints"));
         let scale = self.residual_scale as f32;
         config.residual_schedule.start_scale = scale;
-        config.residual_schedule.final_scale = scale;
+        config.residual_schedule.final_scale = base
+            .tracker_final_residual_scale
+            .map_or(scale, |f| f.min(scale));
         config
     }
 }
@@ -455,6 +458,7 @@ fn judge_all(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::job::ResidualSchedule;
 
     fn at(iteration: u64, accepted: usize) -> ClassPoint {
         ClassPoint {
@@ -487,5 +491,47 @@ mod tests {
         assert_eq!(kept(20, 0.0, &[5, 9, 7, 9, 6]), 3);
         // A small class still allows one clip.
         assert_eq!(kept(2, 0.05, &[1, 2, 1]), 2);
+    }
+
+    #[test]
+    fn a_correction_from_a_tracker_holds_its_residual_scale_or_lowers_it() {
+        let report = ClassReport {
+            clips: 3,
+            tracker_frames: 2,
+            residual_scale: 0.3,
+            iterations: 150,
+            kept_iteration: 150,
+            samples: 0,
+            wall_s: 0.0,
+            stop_reason: "max_iterations".into(),
+            curve: vec![],
+            verdicts: vec![],
+        };
+        let dir = Path::new("tracker");
+        let schedule = |final_scale: Option<f32>| {
+            let base = CorrectConfig {
+                tracker_final_residual_scale: final_scale,
+                ..CorrectConfig::default()
+            };
+            let c = report.warm_config(&base, dir);
+            assert_eq!(c.physics.tracker_frames, 2);
+            assert_eq!(
+                c.warm_start.as_deref(),
+                Some(dir.join("checkpoints").as_path())
+            );
+            let s = c.residual_schedule;
+            (s.start_scale, s.final_scale, s.over_iterations)
+        };
+        let over = ResidualSchedule::default().over_iterations;
+        assert_eq!(schedule(None), (0.3, 0.3, over));
+        assert_eq!(schedule(Some(0.15)), (0.3, 0.15, over));
+        // Never above the tracker's own scale.
+        assert_eq!(schedule(Some(0.5)), (0.3, 0.3, over));
+        // Out of (0, 1]: refused.
+        let bad = CorrectConfig {
+            tracker_final_residual_scale: Some(0.0),
+            ..CorrectConfig::default()
+        };
+        assert!(bad.validate().is_err());
     }
 }

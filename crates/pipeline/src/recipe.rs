@@ -44,6 +44,9 @@
 //!                           #   second tracker trained on them (0 = off)
 //! skate_scale_when_skating_m_s = 0.1  # a clip failing on skating alone trains
 //!                           #   with a sliding term from then on (0 = off)
+//! tracker_final_residual_scale = 0.15  # with policy = "class": lower the root force's
+//!                           #   gains from the tracker's scale to this while fine-tuning
+//!                           #   each clip (optional; default: hold the tracker's)
 //!
 //! [debias]                  # learn (corrected original -> original), apply to corrected clips
 //! iterations = 2000
@@ -230,6 +233,13 @@ pub struct CorrectStep {
     /// starting policy as is, or a rollout at the R_norm target) on (0 = never;
     /// `correct::CorrectConfig::skate_scale_when_skating_m_s`).
     pub skate_scale_when_skating_m_s: f32,
+    /// With `policy = "class"`: lower the PD-residual gains from the
+    /// tracker's scale to this while fine-tuning each clip
+    /// (`correct::CorrectConfig::tracker_final_residual_scale`; `None`: hold
+    /// the tracker's). Written only when set, so recipes saved before it
+    /// existed serialise as they did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tracker_final_residual_scale: Option<f32>,
 }
 
 /// See [`CorrectStep::policy`].
@@ -286,6 +296,7 @@ impl Default for CorrectStep {
                 .tracker_frames,
             variant_tracker_iterations: 0,
             skate_scale_when_skating_m_s: c.skate_scale_when_skating_m_s,
+            tracker_final_residual_scale: c.tracker_final_residual_scale,
         }
     }
 }
@@ -308,6 +319,7 @@ impl CorrectStep {
             envs: self.envs,
             seed,
             skate_scale_when_skating_m_s: self.skate_scale_when_skating_m_s,
+            tracker_final_residual_scale: self.tracker_final_residual_scale,
             ..correct::CorrectConfig::default()
         };
         c.physics.residual = self.residual.physics();
@@ -722,6 +734,12 @@ impl Recipe {
                     "[correct]",
                     "`variant_tracker_iterations` trains a second class tracker: it needs \
                      `policy = \"class\"`",
+                ));
+            } else if c.tracker_final_residual_scale.is_some() {
+                return Err(err(
+                    "[correct]",
+                    "`tracker_final_residual_scale` lowers a class tracker's root force: it \
+                     needs `policy = \"class\"`",
                 ));
             }
         }

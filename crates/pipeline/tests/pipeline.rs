@@ -538,6 +538,21 @@ fn with_class_trackers_every_correction_starts_from_its_class_tracker() {
     assert!(e.contains("tracker_frames"), "{e}");
     let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\npolicy = \"dataset\"\n");
     assert!(e.contains("[correct]"), "{e}");
+
+    // Lowering the tracker's root force while fine-tuning: class policy only,
+    // a scale in (0, 1].
+    let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\ntracker_final_residual_scale = 0.15\n");
+    assert!(e.contains("needs `policy = \"class\"`"), "{e}");
+    let e = recipe_err(
+        "[[ops]]\nop = \"noise\"\n[correct]\npolicy = \"class\"\ntracker_final_residual_scale = 0\n",
+    );
+    assert!(e.contains("(0, 1]"), "{e}");
+    let lowered = Recipe::from_toml_str(
+        "[[ops]]\nop = \"noise\"\n[correct]\npolicy = \"class\"\ntracker_final_residual_scale = 0.15\n",
+    )
+    .expect("recipe");
+    let step = lowered.correct.as_ref().expect("[correct]");
+    assert_eq!(step.config(0).tracker_final_residual_scale, Some(0.15));
 }
 
 #[test]

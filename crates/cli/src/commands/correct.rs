@@ -43,6 +43,11 @@ pub struct Args {
     residual_final_scale: f32,
     #[arg(long, default_value_t = CorrectConfig::default().residual_schedule.over_iterations)]
     residual_anneal_iterations: u64,
+    /// With --tracker: lower the PD-residual gains from the tracker's scale to
+    /// this fraction of MotionAug's over `--residual-anneal-iterations`
+    /// (default: hold the tracker's scale).
+    #[arg(long, requires = "tracker")]
+    tracker_final_residual_scale: Option<f32>,
     /// Weight of the sole reward (feet touching the ground rewarded for heel
     /// and toe on it; 0 = MotionAug's reward).
     #[arg(long, default_value_t = CorrectConfig::default().physics.sole_reward_weight)]
@@ -75,8 +80,8 @@ pub struct Args {
     /// `checkpoints/` (`bench correction`'s `<class>_tracker`, the eval
     /// table's and the pipeline's class trackers). The correction then sees
     /// the upcoming reference frames the tracker was trained with and keeps
-    /// its residual gains (`--residual-final-scale` and
-    /// `--residual-anneal-iterations` do not apply).
+    /// its residual gains (`--residual-final-scale` does not apply; see
+    /// `--tracker-final-residual-scale`).
     #[arg(long, value_name = "DIR")]
     tracker: Option<PathBuf>,
     /// Keep the rest-pose foot boxes instead of building them in the standing
@@ -111,6 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         final_scale: args.residual_final_scale,
         over_iterations: args.residual_anneal_iterations,
     };
+    config.tracker_final_residual_scale = args.tracker_final_residual_scale;
     config.physics.residual = args.residual;
     config.physics.sole_reward_weight = args.sole_reward_weight;
     config.physics.skate_scale_m_s = args.skate_scale;
