@@ -234,9 +234,11 @@ pub struct CorrectStep {
     /// `correct::CorrectConfig::skate_scale_when_skating_m_s`).
     pub skate_scale_when_skating_m_s: f32,
     /// With `policy = "class"`: lower the PD-residual gains from the
-    /// tracker's scale to this while fine-tuning each clip
+    /// tracker's scale to this while fine-tuning each clip, linearly over its
+    /// `max_iterations` (when set)
     /// (`correct::CorrectConfig::tracker_final_residual_scale`; `None`: hold
-    /// the tracker's). Written only when set, so recipes saved before it
+    /// the tracker's). The second tracker still trains at the class
+    /// tracker's scale. Written only when set, so recipes saved before it
     /// existed serialise as they did.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tracker_final_residual_scale: Option<f32>,
@@ -324,6 +326,13 @@ impl CorrectStep {
         };
         c.physics.residual = self.residual.physics();
         c.physics.plant_reference = self.plant_reference;
+        // Lowered over the clip's whole fine-tuning, when it is bounded: the
+        // gains reach the final scale at the last iteration allowed.
+        if let (Some(_), Some(n)) = (self.tracker_final_residual_scale, self.max_iterations)
+            && n > 0
+        {
+            c.residual_schedule.over_iterations = n;
+        }
         c
     }
 

@@ -315,7 +315,15 @@ pub fn train_variant_tracker(
     let from = |max_iterations: u64| correct::ClassConfig {
         correct: correct::CorrectConfig {
             max_iterations: Some(max_iterations),
-            ..class.warm_config(config, class_dir)
+            // It trains at the class tracker's scale; only the clips'
+            // fine-tunes lower it.
+            ..class.warm_config(
+                &correct::CorrectConfig {
+                    tracker_final_residual_scale: None,
+                    ..config.clone()
+                },
+                class_dir,
+            )
         },
         ..correct::ClassConfig::default()
     };

@@ -514,6 +514,13 @@ struct PhysicsArgs {
     /// of the one its held-out pairs choose (an ablation).
     #[arg(long)]
     debias_gain: Option<f64>,
+    /// With `--correct-policy class`: each clip's fine-tuning lowers the root
+    /// force's gains from the tracker's scale to this over its
+    /// `--clip-iterations` (default: hold the tracker's). Finished
+    /// corrections in `--work` are reused whatever their settings: use a
+    /// fresh work folder to measure it.
+    #[arg(long)]
+    tracker_final_residual_scale: Option<f32>,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -632,6 +639,7 @@ impl TableArgs {
                 debias_start_from_mean: p.debias_start_from_mean,
                 debias_smoothing_s: p.debias_smoothing,
                 debias_gain: p.debias_gain,
+                tracker_final_residual_scale: p.tracker_final_residual_scale,
             },
             kept_rows: self.kept_rows,
             threads: usize::from(self.threads),

@@ -97,6 +97,13 @@ pub struct PhysicsConfig {
     /// config's JSON when unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub debias_gain: Option<f64>,
+    /// With `policy = class`: each clip's fine-tuning lowers the root force's
+    /// gains from the tracker's scale to this over its `clip_iterations`
+    /// (`[correct] tracker_final_residual_scale`). Left out of the config's
+    /// JSON when unset. Finished corrections in the work folder are reused
+    /// whatever their settings: measure it in a fresh one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracker_final_residual_scale: Option<f32>,
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -131,6 +138,7 @@ impl Default for PhysicsConfig {
             debias_start_from_mean: false,
             debias_smoothing_s: debias::TrainConfig::default().smoothing_s,
             debias_gain: None,
+            tracker_final_residual_scale: None,
         }
     }
 }
@@ -155,6 +163,18 @@ impl PhysicsConfig {
             return Err(EvalError::Config(
                 "a second tracker (variant tracker iterations) needs the class policy".into(),
             ));
+        }
+        if let Some(s) = self.tracker_final_residual_scale {
+            if self.policy != pipeline::PolicyKind::Class {
+                return Err(EvalError::Config(
+                    "lowering the tracker's residual scale needs the class policy".into(),
+                ));
+            }
+            if !(s.is_finite() && s > 0.0 && s <= 1.0) {
+                return Err(EvalError::Config(format!(
+                    "the tracker's final residual scale {s} is not in (0, 1]"
+                )));
+            }
         }
         let skate = self.skate_scale_when_skating_m_s;
         if !(skate.is_finite() && skate >= 0.0) {
@@ -426,6 +446,7 @@ fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
         tracker_budget_s: config.tracker_budget_s,
         variant_tracker_iterations: config.variant_tracker_iterations,
         skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
+        tracker_final_residual_scale: config.tracker_final_residual_scale,
         ..pipeline::CorrectStep::default()
     }
 }
@@ -706,6 +727,7 @@ mod tests {
         assert!(json.get("original_iterations").is_none());
         assert_eq!(json["debias_smoothing_s"], 0.05);
         assert!(json.get("debias_gain").is_none());
+        assert!(json.get("tracker_final_residual_scale").is_none());
         let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
         assert_eq!(back.debias_smoothing_s, 0.05);
@@ -755,6 +777,33 @@ mod tests {
         };
         half.validate().expect("gain in range");
         assert_eq!(serde_json::to_value(&half).unwrap()["debias_gain"], 0.5);
+    }
+
+    #[test]
+    fn lowering_the_trackers_residual_scale_needs_the_class_policy() {
+        let lowered = |policy| PhysicsConfig {
+            policy,
+            tracker_final_residual_scale: Some(0.15),
+            ..PhysicsConfig::default()
+        };
+        let e = lowered(pipeline::PolicyKind::Clip)
+            .validate()
+            .expect_err("clip policy")
+            .to_string();
+        assert!(e.contains("class policy"), "{e}");
+        let class = lowered(pipeline::PolicyKind::Class);
+        class.validate().expect("class policy");
+        let step = super::correct_step(&class);
+        assert_eq!(step.tracker_final_residual_scale, Some(0.15));
+        // Over the clip's fine-tuning iterations.
+        let c = step.config(0);
+        assert_eq!(c.tracker_final_residual_scale, Some(0.15));
+        assert_eq!(c.residual_schedule.over_iterations, class.clip_iterations);
+        let zero = PhysicsConfig {
+            tracker_final_residual_scale: Some(0.0),
+            ..lowered(pipeline::PolicyKind::Class)
+        };
+        assert!(zero.validate().is_err());
     }
 
     #[test]
