@@ -164,18 +164,17 @@ impl PhysicsConfig {
                 "a second tracker (variant tracker iterations) needs the class policy".into(),
             ));
         }
-        if let Some(s) = self.tracker_final_residual_scale {
-            if self.policy != pipeline::PolicyKind::Class {
-                return Err(EvalError::Config(
-                    "lowering the tracker's residual scale needs the class policy".into(),
-                ));
-            }
-            if !(s.is_finite() && s > 0.0 && s <= 1.0) {
-                return Err(EvalError::Config(format!(
-                    "the tracker's final residual scale {s} is not in (0, 1]"
-                )));
-            }
+        if self.tracker_final_residual_scale.is_some() && self.policy != pipeline::PolicyKind::Class
+        {
+            return Err(EvalError::Config(
+                "lowering the tracker's residual scale needs the class policy".into(),
+            ));
         }
+        // Its range, as the correction itself checks it.
+        correct_step(self)
+            .config(0)
+            .validate()
+            .map_err(|e| EvalError::Config(format!("correction: {e}")))?;
         let skate = self.skate_scale_when_skating_m_s;
         if !(skate.is_finite() && skate >= 0.0) {
             return Err(EvalError::Config(format!(
