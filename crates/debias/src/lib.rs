@@ -17,7 +17,10 @@
 //! * [`model`]: the MLP (4 x 512 ReLU in the paper), an `nn::Mlp`.
 //! * [`train`]: fitting the MLP on pairs (the `nn` crate's seeded initialisation
 //!   and AdamW); a fifth of the pairs held out picks the number of steps and a
-//!   gain in `[0, 1]` before the refit on all pairs; [`Debiaser`] applies,
+//!   gain in `[0, 1]` before the refit on all pairs (or, with
+//!   [`HoldOut::Actors`], each actor's pairs in turn, the checks pooled: is
+//!   the change a bias of the simulation every body shares, or each actor's
+//!   own style?); [`Debiaser`] applies,
 //!   saves and loads it. With `start_from_mean` the output layer starts at
 //!   zero, so the untrained network is the pairs' mean change (a constant
 //!   offset) and the held-out check at step 0 scores that offset alone
@@ -95,7 +98,7 @@ pub mod train;
 
 pub use contacts::{ContactConfig, ContactReport};
 pub use nn::MlpConfig;
-pub use train::{Debiaser, TrainConfig, TrainReport, train};
+pub use train::{Debiaser, HoldOut, TrainConfig, TrainReport, train, train_with_actors};
 
 #[derive(Debug, thiserror::Error)]
 pub enum DebiasError {

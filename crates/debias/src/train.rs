@@ -75,6 +75,37 @@ pub struct TrainConfig {
     /// held-out check's (at its own least-squares gain).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gain: Option<f64>,
+    /// Which pairs the held-out check scores: a share of the clips
+    /// (`validation_fraction`, clips of actors the first fit also saw) or
+    /// every actor in turn ([`train_with_actors`]).
+    #[serde(skip_serializing_if = "HoldOut::is_clips")]
+    pub hold_out: HoldOut,
+}
+
+/// What the held-out check of [`train`] holds out.
+///
+/// Why actors: the debiaser is applied to clips of the actors it was trained
+/// on, but the table's predictors are tested on an actor nobody trained on,
+/// and a network that only learnt each training actor's own style moves
+/// samples towards those actors. Holding out whole actors asks whether the
+/// change it learnt carries over to a body it has not seen, and scales it
+/// by as much as it does (crate docs: on unseen actors it did not, session 21).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HoldOut {
+    /// `validation_fraction` of the clips, chosen by the seed.
+    #[default]
+    Clips,
+    /// Each actor's pairs in turn, the network fitted on the other actors'
+    /// (one fit per actor); the step count and the gain are chosen on the
+    /// held-out losses pooled over actors. Needs pairs of two actors or more.
+    Actors,
+}
+
+impl HoldOut {
+    fn is_clips(&self) -> bool {
+        *self == HoldOut::Clips
+    }
 }
 
 impl Default for TrainConfig {
@@ -92,6 +123,7 @@ impl Default for TrainConfig {
             start_from_mean: false,
             smoothing_s: 0.05,
             gain: None,
+            hold_out: HoldOut::Clips,
         }
     }
 }
@@ -150,6 +182,10 @@ pub struct TrainReport {
     /// Pairs held out of the first fit to choose the step count and the gain.
     #[serde(default)]
     pub validation_pairs: usize,
+    /// Actors held out in turn (0: the check held out a share of the clips,
+    /// or nothing).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub validation_actors: usize,
     /// Held-out mean squared change of rotations (6D, raw units) left by doing
     /// nothing: corrected vs original.
     #[serde(default)]
@@ -166,6 +202,10 @@ pub struct TrainReport {
 
 fn full_gain() -> f64 {
     1.0
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Held-out loss is checked every this many steps.
@@ -277,7 +317,20 @@ fn aligned(corrected: &Motion, original: &Motion) -> Result<(Vec<f32>, Vec<f32>)
 /// With pairs held out: a first fit on the rest scores the held-out pairs
 /// every [`CHECK_EVERY`] steps and picks the step and the gain; the model is
 /// then fitted on all pairs for that many steps and applied with that gain.
+/// [`HoldOut::Actors`] needs each pair's actor: [`train_with_actors`].
 pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debiaser, TrainReport)> {
+    train_with_actors(pairs, &[], config)
+}
+
+/// [`train`], told the actor of each pair (`actors[i]` for `pairs[i]`):
+/// with [`HoldOut::Actors`] each actor's pairs are held out of one first fit
+/// in turn, and the step and the gain are chosen on the held-out losses
+/// pooled over actors. `actors` is not read with [`HoldOut::Clips`].
+pub fn train_with_actors(
+    pairs: &[(Motion, Motion)],
+    actors: &[String],
+    config: &TrainConfig,
+) -> Result<(Debiaser, TrainReport)> {
     config.validate()?;
     let span = tracing::info_span!("debias_train", pairs = pairs.len());
     let _guard = span.enter();
@@ -288,8 +341,8 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     let joints = first.joints();
     let fps = first.fps();
     let sd = state_dim(joints);
-    let held_out = held_out(pairs.len(), config.validation_fraction, config.seed);
-    let (mut all, mut kept, mut val) = (Rows::default(), Rows::default(), Rows::default());
+    let folds = held_out_folds(pairs.len(), actors, config)?;
+    let mut clips = Vec::with_capacity(pairs.len());
     for (i, (corrected, original)) in pairs.iter().enumerate() {
         if corrected.joints() != joints || (corrected.fps() - fps).abs() > 1e-6 {
             return Err(DebiasError::Data(format!(
@@ -302,25 +355,45 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         let x = inputs(&c, sd);
         let (c, o) = (rotations_of(&c, joints), rotations_of(&o, joints));
         let y: Vec<f32> = o.iter().zip(&c).map(|(o, c)| o - c).collect();
-        let part = if held_out.contains(&i) {
-            &mut val
-        } else {
-            &mut kept
-        };
         let frames = y.len() / output_dim(joints);
-        part.x.extend_from_slice(&x);
-        part.y.extend_from_slice(&y);
-        part.lengths.push(frames);
-        all.x.extend(x);
-        all.y.extend(y);
-        all.lengths.push(frames);
+        clips.push(Rows {
+            x,
+            y,
+            lengths: vec![frames],
+        });
     }
-    let (steps, gain, validation) = if held_out.is_empty() {
-        (config.iterations, 1.0, None)
-    } else {
-        let (_, best) = fit(&kept, joints, fps, config, config.iterations, Some(&val))?;
-        let best = best.ok_or_else(|| DebiasError::Data("no held-out check ran".into()))?;
-        (best.iteration, best.gain, Some((best.loss_zero, best.loss)))
+    let all = Rows::of(clips.iter());
+    // One first fit per fold; their checks pooled step by step.
+    let mut pooled: Vec<Check> = Vec::new();
+    for fold in &folds {
+        let kept = Rows::of(
+            (0..clips.len())
+                .filter(|i| !fold.contains(i))
+                .map(|i| &clips[i]),
+        );
+        let val = Rows::of(
+            (0..clips.len())
+                .filter(|i| fold.contains(i))
+                .map(|i| &clips[i]),
+        );
+        let (_, checks) = fit(&kept, joints, fps, config, config.iterations, Some(&val))?;
+        pooled = match pooled.is_empty() {
+            true => checks,
+            false => pooled
+                .iter()
+                .zip(&checks)
+                .map(|(a, b)| a.pooled(b))
+                .collect(),
+        };
+    }
+    let (steps, gain, validation) = match Check::best(&pooled) {
+        Some(best) => (
+            best.iteration,
+            best.gain(),
+            Some((best.loss_zero(), best.loss())),
+        ),
+        None if folds.is_empty() => (config.iterations, 1.0, None),
+        None => return Err(DebiasError::Data("no held-out check ran".into())),
     };
     let gain = config.gain.unwrap_or(gain);
     let (fitted, _) = fit(&all, joints, fps, config, steps, None)?;
@@ -330,7 +403,11 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         iterations: steps,
         loss_before: fitted.loss_before,
         loss_after: fitted.loss_after,
-        validation_pairs: held_out.len(),
+        validation_pairs: folds.iter().map(Vec::len).sum(),
+        validation_actors: match config.hold_out {
+            HoldOut::Actors => folds.len(),
+            HoldOut::Clips => 0,
+        },
         validation_loss_zero: validation.map(|v| v.0),
         validation_loss: validation.map(|v| v.1),
         gain,
@@ -342,6 +419,7 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
         frames = report.frames,
         gain,
         steps,
+        validation_actors = report.validation_actors,
         validation_loss_zero = ?report.validation_loss_zero,
         validation_loss = ?report.validation_loss,
         "debias trained"
@@ -365,6 +443,35 @@ pub fn train(pairs: &[(Motion, Motion)], config: &TrainConfig) -> Result<(Debias
     Ok((Debiaser { meta, params, mlp }, report))
 }
 
+/// The pairs each first fit holds out (none: no held-out check).
+fn held_out_folds(n: usize, actors: &[String], config: &TrainConfig) -> Result<Vec<Vec<usize>>> {
+    match config.hold_out {
+        HoldOut::Clips => {
+            let fold = held_out(n, config.validation_fraction, config.seed);
+            Ok(if fold.is_empty() { vec![] } else { vec![fold] })
+        }
+        HoldOut::Actors => {
+            if actors.len() != n {
+                return Err(DebiasError::Config(format!(
+                    "holding out actors needs the actor of every pair: {} actors for {n} pairs",
+                    actors.len()
+                )));
+            }
+            let mut by_actor: std::collections::BTreeMap<&str, Vec<usize>> = Default::default();
+            for (i, actor) in actors.iter().enumerate() {
+                by_actor.entry(actor.as_str()).or_default().push(i);
+            }
+            if by_actor.len() < 2 {
+                return Err(DebiasError::Data(format!(
+                    "holding out actors needs pairs of two actors or more; all {n} are {}'s",
+                    actors.first().map_or("nobody", String::as_str)
+                )));
+            }
+            Ok(by_actor.into_values().collect())
+        }
+    }
+}
+
 /// Per-frame inputs and targets (row-major) of some pairs.
 #[derive(Default)]
 struct Rows {
@@ -372,6 +479,19 @@ struct Rows {
     y: Vec<f32>,
     /// Frames of each pair, in order (the low-pass stays within a clip).
     lengths: Vec<usize>,
+}
+
+impl Rows {
+    /// Some clips' rows, one after the other.
+    fn of<'a>(clips: impl Iterator<Item = &'a Rows>) -> Rows {
+        let mut rows = Rows::default();
+        for clip in clips {
+            rows.x.extend_from_slice(&clip.x);
+            rows.y.extend_from_slice(&clip.y);
+            rows.lengths.extend_from_slice(&clip.lengths);
+        }
+        rows
+    }
 }
 
 /// A network fitted on some rows, with the standardisation it was fitted with.
@@ -389,7 +509,7 @@ struct Fitted {
 
 /// Fit a fresh network (seeded by `config.seed`) on `rows` for `steps` steps;
 /// with `held_out`, score it every [`CHECK_EVERY`] steps and after the last,
-/// and return the best step.
+/// and return those checks in order.
 fn fit(
     rows: &Rows,
     joints: usize,
@@ -397,7 +517,7 @@ fn fit(
     config: &TrainConfig,
     steps: usize,
     held_out: Option<&Rows>,
-) -> Result<(Fitted, Option<Best>)> {
+) -> Result<(Fitted, Vec<Check>)> {
     let (id, od) = (input_dim(joints), output_dim(joints));
     let frames = rows.y.len() / od;
     if frames < 2 {
@@ -441,15 +561,13 @@ fn fit(
         .mean_all()?
         .to_scalar::<f32>()? as f64;
 
-    let mut best: Option<Best> = None;
-    let check = |it: usize, best: Option<Best>| -> Result<Option<Best>> {
-        match &val {
-            Some((x, rows)) => {
-                let sigma = config.smoothing_s * fps;
-                Best::keep(best, it, &mlp, x, rows, sigma, &output)
-            }
-            None => Ok(best),
+    let mut checks: Vec<Check> = Vec::new();
+    let mut check = |it: usize| -> Result<()> {
+        if let Some((x, rows)) = &val {
+            let sigma = config.smoothing_s * fps;
+            checks.push(Check::score(it, &mlp, x, rows, sigma, &output)?);
         }
+        Ok(())
     };
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut order: Vec<u32> = (0..frames as u32).collect();
@@ -457,7 +575,7 @@ fn fit(
     let batch = config.batch_size.min(frames);
     for it in 0..steps {
         if it % CHECK_EVERY == 0 {
-            best = check(it, best)?;
+            check(it)?;
         }
         if cursor + batch > frames {
             order.shuffle(&mut rng);
@@ -472,7 +590,7 @@ fn fit(
             tracing::debug!(it, loss = loss.to_scalar::<f32>()?, "debias step");
         }
     }
-    best = check(steps, best)?;
+    check(steps)?;
     let loss_after = mlp
         .forward(&x)?
         .sub(&y)?
@@ -489,7 +607,7 @@ fn fit(
         loss_before,
         loss_after,
     };
-    Ok((fitted, best))
+    Ok((fitted, checks))
 }
 
 /// Which pairs are held out: `round(fraction * n)` of them, at least one when
@@ -505,28 +623,28 @@ fn held_out(n: usize, fraction: f64, seed: u64) -> Vec<usize> {
     order
 }
 
-/// The step with the lowest held-out loss so far, and its gain.
-struct Best {
+/// One held-out check: sums over the held-out values of the predicted change
+/// `p` (raw units, low-passed as when applied) and the wanted change `y`.
+#[derive(Debug, Clone, Copy)]
+struct Check {
     iteration: usize,
-    gain: f64,
-    loss_zero: f64,
-    loss: f64,
+    pp: f64,
+    py: f64,
+    yy: f64,
+    values: f64,
 }
 
-impl Best {
-    /// Score the current weights on the held-out frames (raw units, the
-    /// change low-passed by `sigma` frames as when applied, with its
-    /// least-squares gain in [0, 1]) and keep them if they beat `best`.
-    fn keep(
-        best: Option<Best>,
+impl Check {
+    /// Score the current weights on the held-out frames (the change
+    /// low-passed by `sigma` frames, as when applied).
+    fn score(
         iteration: usize,
         mlp: &Mlp,
         x_val: &Tensor,
         val: &Rows,
         sigma: f64,
         output: &Standardiser,
-    ) -> Result<Option<Best>> {
-        let y_val = val.y.as_slice();
+    ) -> Result<Check> {
         let pred = mlp.forward(x_val)?.flatten_all()?.to_vec1::<f32>()?;
         let pred = low_pass(
             &output.invert(&pred),
@@ -535,29 +653,61 @@ impl Best {
             sigma,
         );
         let (mut py, mut pp, mut yy) = (0.0f64, 0.0f64, 0.0f64);
-        for (p, y) in pred.iter().zip(y_val) {
+        for (p, y) in pred.iter().zip(&val.y) {
             let (p, y) = (*p as f64, *y as f64);
             py += p * y;
             pp += p * p;
             yy += y * y;
         }
-        let gain = if pp > 0.0 {
-            (py / pp).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let n = y_val.len().max(1) as f64;
-        // sum (g p - y)^2 = g^2 pp - 2 g py + yy
-        let loss = (gain * gain * pp - 2.0 * gain * py + yy).max(0.0) / n;
-        if best.as_ref().is_some_and(|b| b.loss <= loss) {
-            return Ok(best);
-        }
-        Ok(Some(Best {
+        Ok(Check {
             iteration,
-            gain,
-            loss_zero: yy / n,
-            loss,
-        }))
+            pp,
+            py,
+            yy,
+            values: val.y.len() as f64,
+        })
+    }
+
+    /// The same step checked on other held-out pairs: the sums added.
+    fn pooled(&self, other: &Check) -> Check {
+        debug_assert_eq!(self.iteration, other.iteration);
+        Check {
+            iteration: self.iteration,
+            pp: self.pp + other.pp,
+            py: self.py + other.py,
+            yy: self.yy + other.yy,
+            values: self.values + other.values,
+        }
+    }
+
+    /// The least-squares gain in [0, 1] of the predicted change.
+    fn gain(&self) -> f64 {
+        match self.pp > 0.0 {
+            true => (self.py / self.pp).clamp(0.0, 1.0),
+            false => 0.0,
+        }
+    }
+
+    /// Mean squared error of the change at [`Check::gain`]:
+    /// `sum (g p - y)^2 = g^2 pp - 2 g py + yy`.
+    fn loss(&self) -> f64 {
+        let g = self.gain();
+        (g * g * self.pp - 2.0 * g * self.py + self.yy).max(0.0) / self.values.max(1.0)
+    }
+
+    /// Mean squared error of doing nothing.
+    fn loss_zero(&self) -> f64 {
+        self.yy / self.values.max(1.0)
+    }
+
+    /// The check with the lowest loss (the earliest of equals).
+    fn best(checks: &[Check]) -> Option<&Check> {
+        checks
+            .iter()
+            .fold(None, |best: Option<&Check>, c| match best {
+                Some(b) if b.loss() <= c.loss() => Some(b),
+                _ => Some(c),
+            })
     }
 }
 
@@ -777,6 +927,100 @@ mod tests {
         let (corrected, original) = &pairs[0];
         let after = error(&model.apply(corrected).expect("apply"), original);
         assert!(after < 0.3 * error(corrected, original), "{after}");
+    }
+
+    /// `m` with the upper back turned by `back` rad and the left upper arm
+    /// by `arm` rad in every frame.
+    fn styled(m: &Motion, back: f64, arm: f64) -> Motion {
+        let nj = m.joints();
+        let [arm_j, back_j] = bent_joints(m);
+        let mut rot = m.rotations().to_vec();
+        for t in 0..m.frames() {
+            rot[t * nj + arm_j] *= DQuat::from_rotation_x(arm);
+            rot[t * nj + back_j] *= DQuat::from_rotation_z(back);
+        }
+        m.with_frames(m.fps(), m.root_translation().to_vec(), rot)
+            .expect("motion")
+    }
+
+    /// Three actors, three clips each. Each actor's back is turned its own way
+    /// in both clips of a pair (the network can tell the actors apart), and
+    /// its originals hold the arm its own way (+0.3, -0.3, +0.3 rad), which
+    /// the corrected clips lost: a style per actor, not a bias of the
+    /// simulation, so it carries over to new clips of an actor but not to a
+    /// new actor.
+    fn styled_pairs() -> (Vec<(Motion, Motion)>, Vec<String>) {
+        let (mut pairs, mut actors) = (Vec::new(), Vec::new());
+        for (k, (back, arm)) in [(0.0, 0.3), (0.2, -0.3), (0.4, 0.3)]
+            .into_iter()
+            .enumerate()
+        {
+            for c in 0..3 {
+                let clip = jittered(&walk(), 500 + 10 * k as u64 + c);
+                pairs.push((styled(&clip, back, 0.0), styled(&clip, back, arm)));
+                actors.push(format!("actor{k}"));
+            }
+        }
+        (pairs, actors)
+    }
+
+    #[test]
+    fn holding_out_actors_drops_a_change_that_is_each_actors_own() {
+        let (pairs, actors) = styled_pairs();
+        let clips = TrainConfig {
+            validation_fraction: 0.34,
+            ..tiny()
+        };
+        let (_, by_clip) = train_with_actors(&pairs, &actors, &clips).expect("train");
+        assert_eq!(by_clip.validation_actors, 0);
+        assert!(by_clip.gain > 0.7, "clips held out: {by_clip:?}");
+        let by_actor = TrainConfig {
+            hold_out: HoldOut::Actors,
+            ..clips
+        };
+        let (model, report) = train_with_actors(&pairs, &actors, &by_actor).expect("train");
+        assert_eq!((report.validation_actors, report.validation_pairs), (3, 9));
+        assert!(
+            report.gain < 0.5 * by_clip.gain,
+            "actors held out: {report:?}"
+        );
+        // Applied to a clip of a training actor it moves the arm less than
+        // the actor's style would.
+        let (corrected, original) = &pairs[0];
+        let moved = error(&model.apply(corrected).expect("apply"), corrected);
+        assert!(moved < 0.6 * error(corrected, original), "moved {moved}");
+    }
+
+    #[test]
+    fn holding_out_actors_keeps_a_bias_every_actor_shares() {
+        let pairs = biased_jittered_pairs();
+        let actors: Vec<String> = ["bd", "bd", "bk", "bk", "dg"].map(String::from).into();
+        let config = TrainConfig {
+            hold_out: HoldOut::Actors,
+            ..tiny()
+        };
+        let (model, report) = train_with_actors(&pairs, &actors, &config).expect("train");
+        assert_eq!((report.validation_actors, report.validation_pairs), (3, 5));
+        assert!(report.gain > 0.8, "{report:?}");
+        let (corrected, original) = &pairs[0];
+        let after = error(&model.apply(corrected).expect("apply"), original);
+        assert!(after < 0.3 * error(corrected, original), "{after}");
+    }
+
+    #[test]
+    fn holding_out_actors_needs_two_actors_and_one_per_pair() {
+        let pairs = biased_jittered_pairs();
+        let config = TrainConfig {
+            hold_out: HoldOut::Actors,
+            ..tiny()
+        };
+        let one: Vec<String> = vec!["bd".into(); 5];
+        let err = train_with_actors(&pairs, &one, &config)
+            .err()
+            .expect("one actor");
+        assert!(err.to_string().contains("two actors"), "{err}");
+        let err = train(&pairs, &config).err().expect("no actors");
+        assert!(err.to_string().contains("0 actors for 5 pairs"), "{err}");
     }
 
     #[test]

@@ -420,15 +420,16 @@ pub fn execute(
             }))
         }
         JobKind::DebiasTrain { originals, config } => {
-            let mut pairs = Vec::with_capacity(originals.len());
+            let (mut pairs, mut actors) = (Vec::new(), Vec::new());
             for name in originals {
                 // Only an accepted correction is a fair example of what the
                 // simulation does to a clip: a fall teaches the debiaser nonsense.
                 if let Some(corrected) = inputs.corrected_original(name)? {
                     pairs.push((corrected, inputs.source(name)?.motion));
+                    actors.push(crate::plan::actor_of(name));
                 }
             }
-            let model = stages::debias_train(config, &pairs)?;
+            let model = stages::debias_train(config, &pairs, &actors)?;
             model.save(ctx.dir)?;
             out.put(Made::Debiaser(model))
         }

@@ -217,6 +217,18 @@ pub fn class_of(name: &str) -> String {
     parts[..end].join("_")
 }
 
+/// The actor of a clip name: the actor part of HDM05 names
+/// (`HDM_bd_kickLFront1Reps_001_120` -> `bd`), else the name without
+/// trailing `_<digits>` groups ([`class_of`]; CMU's `01_03` -> `01`, its
+/// subject).
+pub fn actor_of(name: &str) -> String {
+    let parts: Vec<&str> = name.split('_').collect();
+    if parts.len() >= 4 && parts[0].eq_ignore_ascii_case("HDM") {
+        return parts[1].to_string();
+    }
+    class_of(name)
+}
+
 /// Two-person pairs among clip names (one rule for the whole product).
 pub use interaction::pairs;
 
@@ -748,6 +760,15 @@ mod tests {
 
     fn names(n: &[&str]) -> Vec<String> {
         n.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn actors_are_read_from_hdm05_names_and_else_from_the_name_stem() {
+        assert_eq!(actor_of("HDM_bd_kickLFront1Reps_001_120"), "bd");
+        assert_eq!(actor_of("hdm_tr_jogLeftCircle4StepsRstart_003_120"), "tr");
+        assert_eq!(actor_of("01_03"), "01");
+        assert_eq!(actor_of("walk_002"), "walk");
+        assert_eq!(actor_of("HDM_bd"), "HDM_bd");
     }
 
     #[test]

@@ -398,10 +398,12 @@ fn class_progress(p: &correct::class::ClassProgress) -> correct::job::ProgressEv
 }
 
 /// `debias_train`: fit the debiasing network on (corrected original, original)
-/// pairs. Callers pass only accepted corrections (a fall is not a bias).
+/// pairs, `actors[i]` the actor of `pairs[i]` (for `hold_out = "actors"`).
+/// Callers pass only accepted corrections (a fall is not a bias).
 pub fn debias_train(
     config: &debias::TrainConfig,
     pairs: &[(Motion, Motion)],
+    actors: &[String],
 ) -> Result<debias::Debiaser, PipelineError> {
     if pairs.is_empty() {
         return Err(PipelineError::Job(
@@ -410,7 +412,7 @@ pub fn debias_train(
                 .into(),
         ));
     }
-    Ok(debias::train(pairs, config)?.0)
+    Ok(debias::train_with_actors(pairs, actors, config)?.0)
 }
 
 /// `debias_apply`: remove the learned bias from a corrected clip.

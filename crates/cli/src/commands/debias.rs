@@ -64,6 +64,11 @@ enum What {
         /// standard deviation, seconds (0: none; saved with the model).
         #[arg(long, default_value_t = TrainConfig::default().smoothing_s)]
         smoothing: f64,
+        /// Choose the step count and the gain holding out each actor in turn
+        /// (the actor read from the ORIGINAL's file name: `HDM_<actor>_...`)
+        /// instead of --validation-fraction of the clips.
+        #[arg(long)]
+        hold_out_actors: bool,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -95,6 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             no_metric_contacts,
             start_from_mean,
             smoothing,
+            hold_out_actors,
         } => {
             let contacts = debias::ContactConfig {
                 restore: !no_contacts,
@@ -110,6 +116,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 contacts,
                 start_from_mean,
                 smoothing_s: smoothing,
+                hold_out: match hold_out_actors {
+                    true => debias::HoldOut::Actors,
+                    false => debias::HoldOut::Clips,
+                },
                 ..TrainConfig::default()
             };
             train(&pairs, &clip, &out, &config)
@@ -150,7 +160,7 @@ fn train(
     out: &Path,
     config: &TrainConfig,
 ) -> anyhow::Result<()> {
-    let mut loaded = Vec::with_capacity(pairs.len());
+    let (mut loaded, mut actors) = (Vec::with_capacity(pairs.len()), Vec::new());
     for pair in pairs {
         let Some((c, o)) = pair.split_once('=') else {
             bail!("--pair `{pair}`: expected CORRECTED=ORIGINAL");
@@ -159,8 +169,10 @@ fn train(
         let original = clip.load(&o)?;
         let corrected = onto(clip.load(&c)?, &original, &c)?;
         loaded.push((corrected, original));
+        actors.push(pipeline::plan::actor_of(&clip_name(&o)));
     }
-    let (model, report) = debias::train(&loaded, config).context("training the debiaser")?;
+    let (model, report) =
+        debias::train_with_actors(&loaded, &actors, config).context("training the debiaser")?;
     model
         .save(out)
         .with_context(|| format!("cannot write {}", out.display()))?;
@@ -174,8 +186,12 @@ fn train(
         out.display()
     );
     if let (Some(zero), Some(after)) = (report.validation_loss_zero, report.validation_loss) {
+        let how = match report.validation_actors {
+            0 => String::new(),
+            n => format!(", {n} actors in turn"),
+        };
         eprintln!(
-            "held out {} pairs: change left {:.5} -> {:.5} (step {}, gain {:.2})",
+            "held out {} pairs{how}: change left {:.5} -> {:.5} (step {}, gain {:.2})",
             report.validation_pairs, zero, after, report.iterations, report.gain
         );
     }

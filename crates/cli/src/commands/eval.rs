@@ -514,6 +514,12 @@ struct PhysicsArgs {
     /// of the one its held-out pairs choose (an ablation).
     #[arg(long)]
     debias_gain: Option<f64>,
+    /// What the debiaser's held-out check holds out to choose its step count
+    /// and gain: a fifth of the clips (clips), or each training actor in
+    /// turn (actors: the change is applied only as far as it carries over to
+    /// a body the network has not seen).
+    #[arg(long, value_enum, default_value_t = DebiasHoldOut::Clips)]
+    debias_hold_out: DebiasHoldOut,
     /// With `--correct-policy class`: each clip's fine-tuning lowers the root
     /// force's gains from the tracker's scale to this over its
     /// `--clip-iterations` (default: hold the tracker's). Finished
@@ -521,6 +527,13 @@ struct PhysicsArgs {
     /// fresh work folder to measure it.
     #[arg(long)]
     tracker_final_residual_scale: Option<f32>,
+}
+
+/// The debiaser's held-out check, as the CLI spells it.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum DebiasHoldOut {
+    Clips,
+    Actors,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -639,6 +652,10 @@ impl TableArgs {
                 debias_start_from_mean: p.debias_start_from_mean,
                 debias_smoothing_s: p.debias_smoothing,
                 debias_gain: p.debias_gain,
+                debias_hold_out: match p.debias_hold_out {
+                    DebiasHoldOut::Clips => debias::HoldOut::Clips,
+                    DebiasHoldOut::Actors => debias::HoldOut::Actors,
+                },
                 tracker_final_residual_scale: p.tracker_final_residual_scale,
             },
             kept_rows: self.kept_rows,

@@ -97,6 +97,12 @@ pub struct PhysicsConfig {
     /// config's JSON when unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub debias_gain: Option<f64>,
+    /// What the debiaser's held-out check holds out
+    /// ([`debias::TrainConfig::hold_out`]): a share of the clips (the
+    /// default, left out of the JSON so earlier tables still resume and
+    /// merge) or each training actor in turn.
+    #[serde(default, skip_serializing_if = "is_clips")]
+    pub debias_hold_out: debias::HoldOut,
     /// With `policy = class`: each clip's fine-tuning lowers the root force's
     /// gains from the tracker's scale to this over its `clip_iterations`
     /// (`[correct] tracker_final_residual_scale`). Left out of the config's
@@ -104,6 +110,10 @@ pub struct PhysicsConfig {
     /// whatever their settings: measure it in a fresh one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracker_final_residual_scale: Option<f32>,
+}
+
+fn is_clips(h: &debias::HoldOut) -> bool {
+    *h == debias::HoldOut::Clips
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -138,6 +148,7 @@ impl Default for PhysicsConfig {
             debias_start_from_mean: false,
             debias_smoothing_s: debias::TrainConfig::default().smoothing_s,
             debias_gain: None,
+            debias_hold_out: debias::HoldOut::Clips,
             tracker_final_residual_scale: None,
         }
     }
@@ -680,6 +691,7 @@ fn debias_config(config: &PhysicsConfig) -> debias::TrainConfig {
         start_from_mean: config.debias_start_from_mean,
         smoothing_s: config.debias_smoothing_s,
         gain: config.debias_gain,
+        hold_out: config.debias_hold_out,
         ..defaults
     }
 }
@@ -727,6 +739,7 @@ mod tests {
         assert_eq!(json["debias_smoothing_s"], 0.05);
         assert!(json.get("debias_gain").is_none());
         assert!(json.get("tracker_final_residual_scale").is_none());
+        assert!(json.get("debias_hold_out").is_none());
         let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
         assert_eq!(back.debias_smoothing_s, 0.05);
@@ -776,6 +789,18 @@ mod tests {
         };
         half.validate().expect("gain in range");
         assert_eq!(serde_json::to_value(&half).unwrap()["debias_gain"], 0.5);
+        let by_actor = PhysicsConfig {
+            debias_hold_out: debias::HoldOut::Actors,
+            ..PhysicsConfig::default()
+        };
+        let json = serde_json::to_value(&by_actor).unwrap();
+        assert_eq!(json["debias_hold_out"], "actors");
+        assert_eq!(
+            super::debias_config(&by_actor).hold_out,
+            debias::HoldOut::Actors
+        );
+        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(back, by_actor);
     }
 
     #[test]
