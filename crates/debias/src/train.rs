@@ -103,7 +103,8 @@ pub enum HoldOut {
 }
 
 impl HoldOut {
-    fn is_clips(&self) -> bool {
+    /// The default (left out of saved configs).
+    pub fn is_clips(&self) -> bool {
         *self == HoldOut::Clips
     }
 }
@@ -366,16 +367,10 @@ pub fn train_with_actors(
     // One first fit per fold; their checks pooled step by step.
     let mut pooled: Vec<Check> = Vec::new();
     for fold in &folds {
-        let kept = Rows::of(
-            (0..clips.len())
-                .filter(|i| !fold.contains(i))
-                .map(|i| &clips[i]),
-        );
-        let val = Rows::of(
-            (0..clips.len())
-                .filter(|i| fold.contains(i))
-                .map(|i| &clips[i]),
-        );
+        let (val, kept): (Vec<usize>, Vec<usize>) =
+            (0..clips.len()).partition(|i| fold.contains(i));
+        let kept = Rows::of(kept.iter().map(|&i| &clips[i]));
+        let val = Rows::of(val.iter().map(|&i| &clips[i]));
         let (_, checks) = fit(&kept, joints, fps, config, config.iterations, Some(&val))?;
         pooled = match pooled.is_empty() {
             true => checks,

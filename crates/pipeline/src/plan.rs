@@ -202,14 +202,15 @@ struct NewClip {
     correctable: bool,
 }
 
-/// The class of a clip name: the class part of HDM05 names
-/// (`HDM_bd_kickLFront1Reps_001_120` -> `kickLFront1Reps`), else the name
-/// without trailing `_<digits>` groups.
-pub fn class_of(name: &str) -> String {
+/// `(actor, class)` of an HDM05 name (`HDM_<actor>_<class>_<n>...`), else `None`.
+fn hdm05_parts(name: &str) -> Option<(&str, &str)> {
     let parts: Vec<&str> = name.split('_').collect();
-    if parts.len() >= 4 && parts[0].eq_ignore_ascii_case("HDM") {
-        return parts[2].to_string();
-    }
+    (parts.len() >= 4 && parts[0].eq_ignore_ascii_case("HDM")).then(|| (parts[1], parts[2]))
+}
+
+/// The name without trailing `_<digits>` groups (at least its first part).
+fn stem(name: &str) -> String {
+    let parts: Vec<&str> = name.split('_').collect();
     let mut end = parts.len();
     while end > 1 && parts[end - 1].chars().all(|c| c.is_ascii_digit()) {
         end -= 1;
@@ -217,16 +218,18 @@ pub fn class_of(name: &str) -> String {
     parts[..end].join("_")
 }
 
+/// The class of a clip name: the class part of HDM05 names
+/// (`HDM_bd_kickLFront1Reps_001_120` -> `kickLFront1Reps`), else the name
+/// without trailing `_<digits>` groups.
+pub fn class_of(name: &str) -> String {
+    hdm05_parts(name).map_or_else(|| stem(name), |(_, class)| class.to_string())
+}
+
 /// The actor of a clip name: the actor part of HDM05 names
 /// (`HDM_bd_kickLFront1Reps_001_120` -> `bd`), else the name without
-/// trailing `_<digits>` groups ([`class_of`]; CMU's `01_03` -> `01`, its
-/// subject).
+/// trailing `_<digits>` groups (CMU's `01_03` -> `01`, its subject).
 pub fn actor_of(name: &str) -> String {
-    let parts: Vec<&str> = name.split('_').collect();
-    if parts.len() >= 4 && parts[0].eq_ignore_ascii_case("HDM") {
-        return parts[1].to_string();
-    }
-    class_of(name)
+    hdm05_parts(name).map_or_else(|| stem(name), |(actor, _)| actor.to_string())
 }
 
 /// Two-person pairs among clip names (one rule for the whole product).

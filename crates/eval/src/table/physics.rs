@@ -101,7 +101,7 @@ pub struct PhysicsConfig {
     /// ([`debias::TrainConfig::hold_out`]): a share of the clips (the
     /// default, left out of the JSON so earlier tables still resume and
     /// merge) or each training actor in turn.
-    #[serde(default, skip_serializing_if = "is_clips")]
+    #[serde(default, skip_serializing_if = "debias::HoldOut::is_clips")]
     pub debias_hold_out: debias::HoldOut,
     /// With `policy = class`: each clip's fine-tuning lowers the root force's
     /// gains from the tracker's scale to this over its `clip_iterations`
@@ -110,10 +110,6 @@ pub struct PhysicsConfig {
     /// whatever their settings: measure it in a fresh one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracker_final_residual_scale: Option<f32>,
-}
-
-fn is_clips(h: &debias::HoldOut) -> bool {
-    *h == debias::HoldOut::Clips
 }
 
 fn is_zero_f64(x: &f64) -> bool {
