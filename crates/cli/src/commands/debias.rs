@@ -11,6 +11,23 @@ use motion::Motion;
 use crate::input::{ClipArgs, clip_name};
 use crate::output::write_atomic;
 
+/// The debiaser's held-out check, as the CLI spells it (`debias train
+/// --hold-out`, `eval table --debias-hold-out`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum HoldOut {
+    Clips,
+    Actors,
+}
+
+impl From<HoldOut> for debias::HoldOut {
+    fn from(h: HoldOut) -> Self {
+        match h {
+            HoldOut::Clips => debias::HoldOut::Clips,
+            HoldOut::Actors => debias::HoldOut::Actors,
+        }
+    }
+}
+
 #[derive(clap::Args)]
 pub struct Args {
     #[command(subcommand)]
@@ -64,11 +81,12 @@ enum What {
         /// standard deviation, seconds (0: none; saved with the model).
         #[arg(long, default_value_t = TrainConfig::default().smoothing_s)]
         smoothing: f64,
-        /// Choose the step count and the gain holding out each actor in turn
-        /// (the actor read from the ORIGINAL's file name: `HDM_<actor>_...`)
-        /// instead of --validation-fraction of the clips.
-        #[arg(long)]
-        hold_out_actors: bool,
+        /// What the held-out check that chooses the step count and the gain
+        /// holds out: --validation-fraction of the clips (clips), or each
+        /// actor in turn (actors; the actor read from the ORIGINAL's file
+        /// name: `HDM_<actor>_...`, else the name without a trailing `_<n>`).
+        #[arg(long, value_enum, default_value_t = HoldOut::Clips)]
+        hold_out: HoldOut,
     },
     /// Remove the learned bias from corrected clips.
     Apply {
@@ -100,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             no_metric_contacts,
             start_from_mean,
             smoothing,
-            hold_out_actors,
+            hold_out,
         } => {
             let contacts = debias::ContactConfig {
                 restore: !no_contacts,
@@ -116,10 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 contacts,
                 start_from_mean,
                 smoothing_s: smoothing,
-                hold_out: match hold_out_actors {
-                    true => debias::HoldOut::Actors,
-                    false => debias::HoldOut::Clips,
-                },
+                hold_out: hold_out.into(),
                 ..TrainConfig::default()
             };
             train(&pairs, &clip, &out, &config)

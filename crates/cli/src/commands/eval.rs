@@ -29,6 +29,7 @@ use ::vae::Prior;
 use anyhow::{Context, bail};
 use serde_json::json;
 
+use crate::commands::debias::HoldOut;
 use crate::output::{print_stdout, write_json};
 
 #[derive(clap::Args)]
@@ -518,8 +519,8 @@ struct PhysicsArgs {
     /// and gain: a fifth of the clips (clips), or each training actor in
     /// turn (actors: the change is applied only as far as it carries over to
     /// a body the network has not seen).
-    #[arg(long, value_enum, default_value_t = DebiasHoldOut::Clips)]
-    debias_hold_out: DebiasHoldOut,
+    #[arg(long, value_enum, default_value_t = HoldOut::Clips)]
+    debias_hold_out: HoldOut,
     /// With `--correct-policy class`: each clip's fine-tuning lowers the root
     /// force's gains from the tracker's scale to this over its
     /// `--clip-iterations` (default: hold the tracker's). Finished
@@ -527,13 +528,6 @@ struct PhysicsArgs {
     /// fresh work folder to measure it.
     #[arg(long)]
     tracker_final_residual_scale: Option<f32>,
-}
-
-/// The debiaser's held-out check, as the CLI spells it.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-enum DebiasHoldOut {
-    Clips,
-    Actors,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -652,10 +646,7 @@ impl TableArgs {
                 debias_start_from_mean: p.debias_start_from_mean,
                 debias_smoothing_s: p.debias_smoothing,
                 debias_gain: p.debias_gain,
-                debias_hold_out: match p.debias_hold_out {
-                    DebiasHoldOut::Clips => debias::HoldOut::Clips,
-                    DebiasHoldOut::Actors => debias::HoldOut::Actors,
-                },
+                debias_hold_out: p.debias_hold_out.into(),
                 tracker_final_residual_scale: p.tracker_final_residual_scale,
             },
             kept_rows: self.kept_rows,
