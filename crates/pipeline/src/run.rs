@@ -104,6 +104,9 @@ pub struct Summary {
     pub rejected: Vec<String>,
     /// Jobs that failed (or were skipped because an input failed), with the reason.
     pub failures: Vec<(String, String)>,
+    /// Jobs left out because the clip they work on was not accepted by its
+    /// correction (its debiasing, say): an outcome, not a failure.
+    pub skipped: Vec<String>,
     pub jobs: usize,
 }
 
@@ -122,6 +125,9 @@ struct State<'a> {
     originals: HashMap<String, correct::Outcome>,
     debiaser: Option<Arc<debias::Debiaser>>,
     failed: HashSet<String>,
+    /// Jobs whose clip was rejected by its correction (the correction job
+    /// itself, then each job after it, left out in turn).
+    left_out: HashSet<String>,
     summary: Summary,
 }
 
@@ -193,6 +199,7 @@ pub fn run_plan(
         originals: HashMap::new(),
         debiaser: None,
         failed: HashSet::new(),
+        left_out: HashSet::new(),
         summary: Summary {
             jobs: plan.jobs.len(),
             ..Summary::default()
@@ -270,6 +277,12 @@ impl<'a> State<'a> {
     fn skip_if_inputs_failed(&mut self, job: &PlannedJob) -> bool {
         if let Some(dep) = job.deps.iter().find(|d| self.failed.contains(*d)) {
             self.fail(job, format!("skipped: {dep} failed"));
+            return true;
+        }
+        if let Some(dep) = job.deps.iter().find(|d| self.left_out.contains(*d)) {
+            tracing::debug!(job = job.key, dep, "left out: its clip was not accepted");
+            self.left_out.insert(job.key.clone());
+            self.summary.skipped.push(job.key.clone());
             return true;
         }
         false
@@ -407,7 +420,7 @@ impl<'a> State<'a> {
                     self.summary.rejected.push(clip.clone());
                     self.rejected.insert(clip);
                     // Its debiasing has nothing to work on.
-                    self.failed.insert(job.key.clone());
+                    self.left_out.insert(job.key.clone());
                 }
                 Made::Original { clip, outcome } => {
                     self.originals.insert(clip, outcome);
