@@ -580,6 +580,12 @@ struct TableArgs {
     /// its root is planted: decoded clips jitter (crates/vae/README.md).
     #[arg(long, default_value_t = TableConfig::default().vae_smooth_s)]
     vae_smooth_s: f64,
+    /// Keep each VAE sample's decoded root instead of re-integrating it from
+    /// the planted feet: the correction's skating limit is then the decoder's
+    /// own skating. Finished corrections in `--work` are reused whatever
+    /// their settings: use a fresh work folder to measure it.
+    #[arg(long)]
+    vae_no_plant: bool,
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
@@ -624,6 +630,7 @@ impl TableArgs {
             vae_near_members: self.vae_near_members,
             vae_mixed_motion_weight: self.vae_mixed_motion_weight,
             vae_smooth_s: self.vae_smooth_s,
+            vae_plant_root: !self.vae_no_plant,
             predict: !self.no_predict,
             sets: self.sets.clone(),
             physics: PhysicsConfig {

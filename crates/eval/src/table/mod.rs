@@ -154,6 +154,12 @@ pub struct TableConfig {
     /// Low-pass each VAE sample with a Gaussian of this many seconds before
     /// its root is planted (0: as decoded; `vae::Finish`).
     pub vae_smooth_s: f64,
+    /// Re-integrate each VAE sample's root path from its planted feet
+    /// (`vae::Finish::plant_root`, the default). Off, the samples keep the
+    /// decoded root, and the correction's "no more skating than the input"
+    /// is measured against the decoder's own skating instead of a root
+    /// planted onto the feet (crates/eval/README.md, jog fold mm, session 31).
+    pub vae_plant_root: bool,
     /// Train and score the prediction models (else synthesis metrics only).
     pub predict: bool,
     pub sets: Vec<SetKind>,
@@ -189,6 +195,7 @@ impl Default for TableConfig {
             vae_near_members: None,
             vae_mixed_motion_weight: 0.0,
             vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
+            vae_plant_root: true,
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
@@ -502,7 +509,7 @@ fn made_sets(
             vae_runs.push(("vae_noadv", Some(0.0)));
         }
     }
-    let finish = vae::Finish::new(config.vae_smooth_s, true);
+    let finish = vae::Finish::new(config.vae_smooth_s, config.vae_plant_root);
     for (tag, weight) in vae_runs {
         let t = Instant::now();
         let mut cache_name = format!("{tag}-{}it", config.vae_iterations);

@@ -52,6 +52,9 @@ impl TableConfig {
                     json!(c.vae_mixed_motion_weight),
                 );
             }
+            if !c.vae_plant_root {
+                map.insert("vae_plant_root".into(), json!(false));
+            }
             if c.kept_rows {
                 map.insert("kept_rows".into(), json!(true));
             }
@@ -1027,5 +1030,20 @@ mod tests {
             "a cell made without the term is not reused with it"
         );
         assert_eq!(saved(&t).config["vae_mixed_motion_weight"], 1.0);
+    }
+
+    #[test]
+    fn unplanted_vae_samples_are_recorded_only_when_asked_for() {
+        let mut t = table();
+        let planted = t.config.cell_key();
+        assert!(planted.get("vae_plant_root").is_none(), "{planted}");
+        t.config.vae_plant_root = false;
+        let unplanted = t.config.cell_key();
+        assert_eq!(unplanted["vae_plant_root"], false);
+        assert_ne!(
+            unplanted, planted,
+            "a cell of planted samples is not reused"
+        );
+        assert_eq!(saved(&t).config["vae_plant_root"], false);
     }
 }
