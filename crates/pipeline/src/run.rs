@@ -104,9 +104,6 @@ pub struct Summary {
     pub rejected: Vec<String>,
     /// Jobs that failed (or were skipped because an input failed), with the reason.
     pub failures: Vec<(String, String)>,
-    /// Jobs left out because the clip they work on was not accepted by its
-    /// correction (its debiasing, say): an outcome, not a failure.
-    pub skipped: Vec<String>,
     pub jobs: usize,
 }
 
@@ -125,9 +122,6 @@ struct State<'a> {
     originals: HashMap<String, correct::Outcome>,
     debiaser: Option<Arc<debias::Debiaser>>,
     failed: HashSet<String>,
-    /// Jobs whose clip was rejected by its correction (the correction job
-    /// itself, then each job after it, left out in turn).
-    left_out: HashSet<String>,
     summary: Summary,
 }
 
@@ -199,7 +193,6 @@ pub fn run_plan(
         originals: HashMap::new(),
         debiaser: None,
         failed: HashSet::new(),
-        left_out: HashSet::new(),
         summary: Summary {
             jobs: plan.jobs.len(),
             ..Summary::default()
@@ -277,12 +270,6 @@ impl<'a> State<'a> {
     fn skip_if_inputs_failed(&mut self, job: &PlannedJob) -> bool {
         if let Some(dep) = job.deps.iter().find(|d| self.failed.contains(*d)) {
             self.fail(job, format!("skipped: {dep} failed"));
-            return true;
-        }
-        if let Some(dep) = job.deps.iter().find(|d| self.left_out.contains(*d)) {
-            tracing::debug!(job = job.key, dep, "left out: its clip was not accepted");
-            self.left_out.insert(job.key.clone());
-            self.summary.skipped.push(job.key.clone());
             return true;
         }
         false
@@ -418,9 +405,10 @@ impl<'a> State<'a> {
                 Made::Rejected { clip, .. } => {
                     self.pending.remove(&clip);
                     self.summary.rejected.push(clip.clone());
+                    // Its debiasing still runs and finds nothing to work
+                    // on (`Inputs::clip` gives `None`), as on a worker: a
+                    // rejection is an outcome, not a failure.
                     self.rejected.insert(clip);
-                    // Its debiasing has nothing to work on.
-                    self.left_out.insert(job.key.clone());
                 }
                 Made::Original { clip, outcome } => {
                     self.originals.insert(clip, outcome);

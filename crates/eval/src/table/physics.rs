@@ -405,7 +405,7 @@ impl Seen {
 
 /// The run's failures, but for the expected ones: nothing to debias (no
 /// accepted original). A sample whose own correction was rejected is not a
-/// failure: the pipeline leaves its debiasing out (`Summary::skipped`).
+/// failure: its debiasing runs and finds nothing to debias.
 fn unexpected_failures(run: &pipeline::Summary, no_pairs: bool) -> Vec<String> {
     run.failures
         .iter()
