@@ -528,6 +528,13 @@ struct PhysicsArgs {
     /// fresh work folder to measure it.
     #[arg(long)]
     tracker_final_residual_scale: Option<f32>,
+    /// Imitate every clip with its root re-integrated from its planted feet
+    /// (`[correct] plant_reference`); acceptance still compares the output
+    /// with the clip as given (with --vae-no-plant: the VAE's decoded
+    /// sample). Finished corrections in `--work` are reused whatever their
+    /// settings: use a fresh work folder to measure it.
+    #[arg(long)]
+    plant_reference: bool,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -655,6 +662,7 @@ impl TableArgs {
                 debias_gain: p.debias_gain,
                 debias_hold_out: p.debias_hold_out.into(),
                 tracker_final_residual_scale: p.tracker_final_residual_scale,
+                plant_reference: p.plant_reference,
             },
             kept_rows: self.kept_rows,
             threads: usize::from(self.threads),

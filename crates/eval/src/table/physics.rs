@@ -110,6 +110,13 @@ pub struct PhysicsConfig {
     /// whatever their settings: measure it in a fresh one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracker_final_residual_scale: Option<f32>,
+    /// Every clip is imitated with its root re-integrated from its planted
+    /// feet (`[correct] plant_reference`); acceptance still compares the
+    /// output with the clip as given. Left out of the config's JSON when off
+    /// (the default). Finished corrections in the work folder are reused
+    /// whatever their settings: measure it in a fresh one.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub plant_reference: bool,
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -146,6 +153,7 @@ impl Default for PhysicsConfig {
             debias_gain: None,
             debias_hold_out: debias::HoldOut::Clips,
             tracker_final_residual_scale: None,
+            plant_reference: false,
         }
     }
 }
@@ -450,6 +458,7 @@ fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
         variant_tracker_iterations: config.variant_tracker_iterations,
         skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
         tracker_final_residual_scale: config.tracker_final_residual_scale,
+        plant_reference: config.plant_reference,
         ..pipeline::CorrectStep::default()
     }
 }
@@ -733,6 +742,7 @@ mod tests {
         assert!(json.get("debias_gain").is_none());
         assert!(json.get("tracker_final_residual_scale").is_none());
         assert!(json.get("debias_hold_out").is_none());
+        assert!(json.get("plant_reference").is_none());
         let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
         assert_eq!(back.debias_smoothing_s, 0.05);
@@ -821,6 +831,25 @@ mod tests {
             ..lowered(pipeline::PolicyKind::Class)
         };
         assert!(zero.validate().is_err());
+    }
+
+    #[test]
+    fn a_planted_reference_reaches_every_correction_and_the_saved_config() {
+        let planted = PhysicsConfig {
+            policy: pipeline::PolicyKind::Class,
+            plant_reference: true,
+            ..PhysicsConfig::default()
+        };
+        planted.validate().expect("valid");
+        let json = serde_json::to_value(&planted).unwrap();
+        assert_eq!(json["plant_reference"], true);
+        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(back, planted);
+        let step = super::correct_step(&planted);
+        assert!(step.config(0).physics.plant_reference);
+        assert!(step.tracker_config(0).correct.physics.plant_reference);
+        let as_captured = super::correct_step(&PhysicsConfig::default());
+        assert!(!as_captured.config(0).physics.plant_reference);
     }
 
     #[test]
