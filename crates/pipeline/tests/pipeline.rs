@@ -420,7 +420,7 @@ fn rejected_corrections_are_left_out_unless_kept() {
 }
 
 #[test]
-fn a_rejected_clip_leaves_its_debiasing_out_and_nothing_fails() {
+fn a_rejected_clips_debiasing_makes_nothing_and_nothing_fails() {
     // Copies twisted by 30 degrees of noise per joint are not accepted even
     // by the plumbing's lenient limits, while the original is and pairs the
     // debiaser: each rejected copy's debiasing runs, finds nothing to work
