@@ -68,7 +68,12 @@ impl Augmentation {
                 recipe, seed, work, ..
             } => apply_recipe(recipe, *seed, work.as_deref(), train, log),
             Augmentation::Vae(v) => {
-                let model = train_vae(train, v.iterations, v.adversarial_weight, 0.0, v.seed, log)?;
+                let training = VaeTraining {
+                    iterations: v.iterations,
+                    adversarial_weight: v.adversarial_weight,
+                    ..VaeTraining::default()
+                };
+                let model = train_vae(train, &training, v.seed, log)?;
                 let finish = vae::Finish::default();
                 sample_vae(&model, train.len() * v.per_clip, v.prior, v.seed, &finish)
             }
@@ -146,38 +151,73 @@ pub fn apply_recipe(
     Ok(out)
 }
 
+/// What the eval crate changes in the vae crate's training defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VaeTraining {
+    pub iterations: u64,
+    /// Weight of the adversarial terms; `Some(0.0)`: no discriminators;
+    /// `None`: the vae crate's default.
+    pub adversarial_weight: Option<f64>,
+    /// `vae::LossWeights::mixed_motion` (0: off, the vae crate's default).
+    pub mixed_motion_weight: f64,
+    /// Put the training clips on one floor (`vae::FloorLevel`, the vae
+    /// crate's default); off, they stand as captured.
+    pub level_floor: bool,
+}
+
+impl Default for VaeTraining {
+    /// The vae crate's defaults, 1,500 iterations.
+    fn default() -> Self {
+        VaeTraining {
+            iterations: 1500,
+            adversarial_weight: None,
+            mixed_motion_weight: 0.0,
+            level_floor: true,
+        }
+    }
+}
+
+impl VaeTraining {
+    fn config(&self, seed: u64) -> VaeTrainConfig {
+        let mut config = VaeTrainConfig {
+            iterations: self.iterations.max(1),
+            seed,
+            ..VaeTrainConfig::default()
+        };
+        config.weights.mixed_motion = self.mixed_motion_weight;
+        if let Some(w) = self.adversarial_weight {
+            if w == 0.0 {
+                config.adversarial = false;
+            } else {
+                config.weights.adversarial = w;
+            }
+        }
+        config.features.floor = self.level_floor.then(vae::FloorLevel::default);
+        config
+    }
+}
+
 /// Trains the motion VAE on the training clips (deterministic for a seed).
-/// `mixed_motion_weight`: `vae::LossWeights::mixed_motion` (0: off, the vae
-/// crate's default).
 pub fn train_vae(
     train: &[(String, Motion)],
-    iterations: u64,
-    adversarial_weight: Option<f64>,
-    mixed_motion_weight: f64,
+    training: &VaeTraining,
     seed: u64,
     log: Log,
 ) -> Result<TrainedVae> {
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
-    let mut config = VaeTrainConfig {
-        iterations: iterations.max(1),
-        seed,
-        ..VaeTrainConfig::default()
-    };
-    config.weights.mixed_motion = mixed_motion_weight;
-    if let Some(w) = adversarial_weight {
-        if w == 0.0 {
-            config.adversarial = false;
-        } else {
-            config.weights.adversarial = w;
-        }
-    }
+    let config = training.config(seed);
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, {}",
         clips.len(),
         config.iterations,
         config.adversarial,
         config.weights.adversarial,
-        config.weights.mixed_motion
+        config.weights.mixed_motion,
+        if config.features.floor.is_some() {
+            "clips on one floor"
+        } else {
+            "clips on their captured floors"
+        }
     ));
     let every = (config.iterations / 5).max(1);
     let model = vae::train(&clips, &config, |p| {
@@ -197,27 +237,31 @@ pub fn train_vae(
 
 /// The VAE of one class and fold (seed 0): loaded from `dir` when an earlier
 /// run saved it there (training is deterministic, so this is the same model),
-/// else trained and saved, so a rerun does not train it again.
+/// else trained and saved, so a rerun does not train it again. A saved model
+/// whose clips stood on other floors than `training` asks for is an error,
+/// not a silent reuse.
 pub fn cached_vae(
     dir: &Path,
     train: &[(String, Motion)],
-    iterations: u64,
-    adversarial_weight: Option<f64>,
-    mixed_motion_weight: f64,
+    training: &VaeTraining,
     log: Log,
 ) -> Result<TrainedVae> {
     if dir.join(vae::trained::META_FILE).is_file() {
         log(&format!("vae: reusing {}", dir.display()));
-        return Ok(TrainedVae::load(dir)?);
+        let model = TrainedVae::load(dir)?;
+        let wanted = training.config(0).features.floor;
+        if model.meta().features.floor != wanted {
+            return Err(EvalError::Config(format!(
+                "the VAE in {} was trained with floor levelling {:?}, this run asks for {:?}: \
+                 use another work folder",
+                dir.display(),
+                model.meta().features.floor,
+                wanted
+            )));
+        }
+        return Ok(model);
     }
-    let model = train_vae(
-        train,
-        iterations,
-        adversarial_weight,
-        mixed_motion_weight,
-        0,
-        log,
-    )?;
+    let model = train_vae(train, training, 0, log)?;
     model.save(dir)?;
     Ok(model)
 }
@@ -237,4 +281,53 @@ pub fn sample_vae(
         .enumerate()
         .map(|(i, s)| (format!("vae_{prior:?}_{i:04}"), s.motion))
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kick() -> Vec<(String, Motion)> {
+        let asf = motion::asf::parse(
+            include_bytes!("../../../examples/data/HDM_bd.asf"),
+            "HDM_bd.asf",
+        )
+        .unwrap();
+        let m = motion::amc::read(
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../../examples/data/HDM_bd_kickLFront1Reps_001_120.amc"
+            ),
+            &asf,
+            120.0,
+        )
+        .unwrap();
+        vec![("kick".into(), m)]
+    }
+
+    #[test]
+    fn a_cached_vae_trained_on_other_floors_is_not_reused() {
+        let dir = tempfile::tempdir().unwrap();
+        let quiet: Log = &|_| {};
+        let one_floor = VaeTraining {
+            iterations: 1,
+            adversarial_weight: Some(0.0),
+            ..VaeTraining::default()
+        };
+        let made = cached_vae(dir.path(), &kick(), &one_floor, quiet).unwrap();
+        assert_eq!(made.meta().features.floor, Some(vae::FloorLevel::default()));
+        // The same settings reuse it; the captured floors do not.
+        assert!(cached_vae(dir.path(), &[], &one_floor, quiet).is_ok());
+        let captured = VaeTraining {
+            level_floor: false,
+            ..one_floor
+        };
+        match cached_vae(dir.path(), &[], &captured, quiet) {
+            Err(e) => assert!(e.to_string().contains("floor"), "{e}"),
+            Ok(_) => panic!("a one-floor VAE reused for the captured floors"),
+        }
+        let fresh = tempfile::tempdir().unwrap();
+        let made = cached_vae(fresh.path(), &kick(), &captured, quiet).unwrap();
+        assert_eq!(made.meta().features.floor, None);
+    }
 }

@@ -132,6 +132,30 @@ fn point(x: &[Transform], p: (usize, Option<DVec3>)) -> DVec3 {
     }
 }
 
+/// Height of the lowest body point (joints and end sites) of one frame's
+/// world transforms `x`.
+fn lowest_point(s: &crate::Skeleton, x: &[Transform]) -> f64 {
+    let mut lo = f64::INFINITY;
+    for (j, t) in x.iter().enumerate() {
+        lo = lo.min(t.translation.y);
+        if let Some(e) = s.joint(j).end_site {
+            lo = lo.min((t.translation + t.rotation * e).y);
+        }
+    }
+    lo
+}
+
+/// Per frame, the height of the lowest body point (joints and end sites), m.
+pub fn lowest_points(motion: &Motion) -> Vec<f64> {
+    let mut x = vec![Transform::IDENTITY; motion.joints()];
+    (0..motion.frames())
+        .map(|t| {
+            motion.world_transforms_into(t, &mut x);
+            lowest_point(motion.skeleton(), &x)
+        })
+        .collect()
+}
+
 /// The sole points of `motion`'s skeleton: the foot points whose rest height
 /// is within `th.sole_band_m` of the lowest one (see the module doc), each a
 /// joint and, for its end site, the site's offset.
@@ -238,13 +262,8 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
     let mut drift = 0.0f64;
     for t in 0..n_t {
         motion.world_transforms_into(t, &mut x);
-        let mut lo = f64::INFINITY;
         for j in 0..n_j {
             let p = x[j].translation;
-            lo = lo.min(p.y);
-            if let Some(e) = s.joint(j).end_site {
-                lo = lo.min((p + x[j].rotation * e).y);
-            }
             if let Some(parent) = s.parent(j)
                 && lengths[j] > 1e-9
             {
@@ -253,7 +272,7 @@ pub fn plausibility_with(motion: &Motion, th: &Thresholds) -> Plausibility {
             }
             positions.push(p);
         }
-        lowest.push(lo);
+        lowest.push(lowest_point(s, &x));
         foot_pos.extend(feet.iter().map(|p| point(&x, *p)));
     }
 
@@ -483,6 +502,9 @@ mod tests {
         assert!((up.lowest_point_mean_m - 0.2).abs() < 1e-9);
         assert_eq!(up.contact_fraction, 0.0);
         assert_eq!(up.foot_skating_m_s, 0.0, "no contact, no skating");
+        let lows = lowest_points(&standing(20, 0.3, 0.2));
+        assert_eq!(lows.len(), 20);
+        assert!(lows.iter().all(|y| (y - 0.2).abs() < 1e-9), "{lows:?}");
     }
 
     #[test]

@@ -18,6 +18,7 @@
 //! mixed_motion_weight = 0.0 # > 0: codes between clips decode to motion as fast as theirs
 //! smooth_s = 0.05           # low-pass each sample (seconds; 0 = as decoded): decoded clips jitter
 //! plant_root = true         # re-integrate each sample's root from its planted feet
+//! level_floor = true        # train on every clip moved onto one floor (actors stand 0-3 cm apart)
 //!
 //! [interaction]             # every pair <stem>_A / <stem>_B: `copies` body-size variations of B
 //! copies = 4
@@ -93,9 +94,28 @@ pub struct VaeStep {
     pub smooth_s: f64,
     /// Re-integrate each sample's root path from its planted feet.
     pub plant_root: bool,
+    /// Move each training clip vertically onto one floor before training
+    /// (`vae::FloorLevel`); off, clips stand as captured. HDM05's actors
+    /// stand 0-3 cm apart, and a VAE trained on them as captured decodes
+    /// feet that hover (crates/vae/README.md, session 33).
+    pub level_floor: bool,
 }
 
 impl VaeStep {
+    /// The vae crate's training configuration this step asks for.
+    pub fn train_config(&self, seed: u64) -> vae::TrainConfig {
+        let mut config = vae::TrainConfig {
+            iterations: self.iterations,
+            adversarial: self.adversarial,
+            seed,
+            ..vae::TrainConfig::default()
+        };
+        config.near.members = self.near_members;
+        config.weights.mixed_motion = self.mixed_motion_weight;
+        config.features.floor = self.level_floor.then(vae::FloorLevel::default);
+        config
+    }
+
     /// What is done to each decoded sample.
     pub fn finish(&self) -> vae::Finish {
         vae::Finish::new(self.smooth_s, self.plant_root)
@@ -122,6 +142,7 @@ impl Default for VaeStep {
             mixed_motion_weight: 0.0,
             smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             plant_root: true,
+            level_floor: true,
         }
     }
 }

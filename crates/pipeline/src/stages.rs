@@ -67,14 +67,7 @@ pub fn vae(
 ) -> Result<Vec<NewClip>, PipelineError> {
     let span = tracing::info_span!("vae_job", group, clips = clips.len());
     let _guard = span.enter();
-    let mut config = vae::TrainConfig {
-        iterations: step.iterations,
-        adversarial: step.adversarial,
-        seed,
-        ..vae::TrainConfig::default()
-    };
-    config.near.members = step.near_members;
-    config.weights.mixed_motion = step.mixed_motion_weight;
+    let config = step.train_config(seed);
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
     let model = vae::train(&motions, &config, |_| {})?;
     let samples = model.sample_finished(step.copies as usize, step.prior, seed, &step.finish())?;

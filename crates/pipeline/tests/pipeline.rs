@@ -456,6 +456,30 @@ fn a_rejected_clips_debiasing_makes_nothing_and_nothing_fails() {
 }
 
 #[test]
+fn the_vae_trains_on_one_floor_unless_told_to_keep_the_captured_ones() {
+    let floor = |text: &str| {
+        let recipe = Recipe::from_toml_str(text).expect("recipe");
+        let step = recipe.vae.expect("a [vae] table");
+        step.train_config(0).features.floor
+    };
+    assert_eq!(floor("[vae]\n"), Some(vae::FloorLevel::default()));
+    assert_eq!(floor("[vae]\nlevel_floor = false\n"), None);
+    let step = Recipe::from_toml_str("[vae]\nmixed_motion_weight = 2\nnear_members = 3\n")
+        .expect("recipe")
+        .vae
+        .expect("a [vae] table");
+    let config = step.train_config(5);
+    assert_eq!(
+        (
+            config.weights.mixed_motion,
+            config.near.members,
+            config.seed
+        ),
+        (2.0, 3, 5)
+    );
+}
+
+#[test]
 fn vae_table_trains_per_class_and_samples() {
     let recipe = Recipe::from_toml_str(
         "[vae]\ncopies = 3\niterations = 2\nmin_clips = 1\nadversarial = false\n",

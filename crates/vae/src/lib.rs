@@ -35,7 +35,7 @@ pub mod train;
 pub mod trained;
 
 pub use error::{Result, VaeError};
-pub use features::FeatureConfig;
+pub use features::{FeatureConfig, FloorLevel};
 pub use feet::FootLoss;
 pub use latent::{NearConfig, Prior};
 pub use model::VaeConfig;

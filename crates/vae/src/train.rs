@@ -110,12 +110,7 @@ impl TrainConfig {
                 "iterations and batch_size must be >= 1".into(),
             ));
         }
-        if !(self.features.fps.is_finite() && self.features.fps > 0.0) {
-            return Err(VaeError::Config(format!(
-                "feature frame rate {} must be > 0",
-                self.features.fps
-            )));
-        }
+        self.features.validate()?;
         if self
             .max_grad_norm
             .is_some_and(|m| !(m.is_finite() && m > 0.0))

@@ -593,6 +593,11 @@ struct TableArgs {
     /// their settings: use a fresh work folder to measure it.
     #[arg(long)]
     vae_no_plant: bool,
+    /// Train the VAE on the clips as captured instead of putting each on one
+    /// floor (HDM05's actors stand 0-3 cm apart; crates/vae/README.md). Tables
+    /// made before this option existed were made this way.
+    #[arg(long)]
+    vae_captured_floors: bool,
     /// Skip the prediction part (synthesis metrics only).
     #[arg(long)]
     no_predict: bool,
@@ -638,6 +643,7 @@ impl TableArgs {
             vae_mixed_motion_weight: self.vae_mixed_motion_weight,
             vae_smooth_s: self.vae_smooth_s,
             vae_plant_root: !self.vae_no_plant,
+            vae_level_floor: !self.vae_captured_floors,
             predict: !self.no_predict,
             sets: self.sets.clone(),
             physics: PhysicsConfig {

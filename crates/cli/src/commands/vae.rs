@@ -116,6 +116,11 @@ struct TrainArgs {
     /// clips they were drawn between (pose speed).
     #[arg(long)]
     mixed_motion_weight: Option<f64>,
+    /// Train on the clips as captured instead of moving each onto one floor
+    /// (its lowest body point at 5 mm in a tenth of its frames; actors of
+    /// one dataset stand centimetres apart, and the samples' feet hover).
+    #[arg(long)]
+    captured_floors: bool,
     /// Print losses every N iterations (0: only the summary).
     #[arg(long, default_value_t = 100)]
     log_every: u64,
@@ -197,6 +202,9 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     config.adversarial = !args.no_adversarial;
     if args.no_foot_terms {
         config.feet = ::vae::FootLoss::off();
+    }
+    if args.captured_floors {
+        config.features.floor = None;
     }
     if let Some(lr) = args.lr {
         config.optimizer = match config.optimizer {

@@ -30,7 +30,7 @@ use motion::Motion;
 use serde::{Deserialize, Serialize};
 use vae::Prior;
 
-use crate::augment::{apply_recipe, cached_vae, sample_vae};
+use crate::augment::{VaeTraining, apply_recipe, cached_vae, sample_vae};
 use crate::dataset::{self, Split};
 use crate::error::{EvalError, Result};
 use crate::options::TrainOptions;
@@ -160,6 +160,12 @@ pub struct TableConfig {
     /// is measured against the decoder's own skating instead of a root
     /// planted onto the feet (crates/eval/README.md, jog fold mm, session 31).
     pub vae_plant_root: bool,
+    /// Put the VAE's training clips on one floor (`vae::FloorLevel`, the vae
+    /// crate's default); off, each stands as captured (tables made before
+    /// session 33). HDM05's actors stand 0-3 cm apart in height, and fold
+    /// bd's jog samples floated in 42 % of frames on the captured floors,
+    /// 29 % on one (crates/vae/README.md).
+    pub vae_level_floor: bool,
     /// Train and score the prediction models (else synthesis metrics only).
     pub predict: bool,
     pub sets: Vec<SetKind>,
@@ -196,6 +202,7 @@ impl Default for TableConfig {
             vae_mixed_motion_weight: 0.0,
             vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             vae_plant_root: true,
+            vae_level_floor: true,
             predict: true,
             sets: vec![SetKind::Noise, SetKind::Ik, SetKind::Vae, SetKind::VaeIk],
             physics: PhysicsConfig::default(),
@@ -516,14 +523,16 @@ fn made_sets(
         if config.vae_mixed_motion_weight > 0.0 {
             cache_name.push_str(&format!("-mixed-motion-{}", config.vae_mixed_motion_weight));
         }
-        let mut model = cached_vae(
-            &work.join(cache_name),
-            &split.train,
-            config.vae_iterations,
-            weight,
-            config.vae_mixed_motion_weight,
-            log,
-        )?;
+        if config.vae_level_floor {
+            cache_name.push_str("-one-floor");
+        }
+        let training = VaeTraining {
+            iterations: config.vae_iterations,
+            adversarial_weight: weight,
+            mixed_motion_weight: config.vae_mixed_motion_weight,
+            level_floor: config.vae_level_floor,
+        };
+        let mut model = cached_vae(&work.join(cache_name), &split.train, &training, log)?;
         if let Some(members) = config.vae_near_members {
             model = model.with_near_members(members)?;
         }

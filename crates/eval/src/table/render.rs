@@ -55,6 +55,10 @@ impl TableConfig {
             if !c.vae_plant_root {
                 map.insert("vae_plant_root".into(), json!(false));
             }
+            // Tables before session 33 trained on the captured floors.
+            if c.vae_level_floor {
+                map.insert("vae_level_floor".into(), json!(true));
+            }
             if c.kept_rows {
                 map.insert("kept_rows".into(), json!(true));
             }
@@ -1030,6 +1034,20 @@ mod tests {
             "a cell made without the term is not reused with it"
         );
         assert_eq!(saved(&t).config["vae_mixed_motion_weight"], 1.0);
+    }
+
+    #[test]
+    fn vae_clips_on_one_floor_are_recorded_and_captured_floors_are_not() {
+        let mut t = table();
+        assert!(t.config.vae_level_floor, "the default");
+        let one = t.config.cell_key();
+        assert_eq!(one["vae_level_floor"], true);
+        t.config.vae_level_floor = false;
+        let captured = t.config.cell_key();
+        // As captured: left out, as tables saved before the option have it,
+        // so those resume and merge only when asked for the captured floors.
+        assert!(captured.get("vae_level_floor").is_none(), "{captured}");
+        assert_ne!(one, captured);
     }
 
     #[test]
