@@ -160,6 +160,10 @@ pub struct VaeTraining {
     pub adversarial_weight: Option<f64>,
     /// `vae::LossWeights::mixed_motion` (0: off, the vae crate's default).
     pub mixed_motion_weight: f64,
+    /// `vae::LossWeights::mixed_contact` (0: off, the vae crate's default).
+    pub mixed_contact_weight: f64,
+    /// `vae::FootLoss::skating` (`None`: the vae crate's default).
+    pub skating_weight: Option<f64>,
     /// Put the training clips on one floor (`vae::FloorLevel`, the vae
     /// crate's default); off, they stand as captured.
     pub level_floor: bool,
@@ -172,6 +176,8 @@ impl Default for VaeTraining {
             iterations: 1500,
             adversarial_weight: None,
             mixed_motion_weight: 0.0,
+            mixed_contact_weight: 0.0,
+            skating_weight: None,
             level_floor: true,
         }
     }
@@ -185,6 +191,10 @@ impl VaeTraining {
             ..VaeTrainConfig::default()
         };
         config.weights.mixed_motion = self.mixed_motion_weight;
+        config.weights.mixed_contact = self.mixed_contact_weight;
+        if let Some(w) = self.skating_weight {
+            config.feet.skating = w;
+        }
         if let Some(w) = self.adversarial_weight {
             if w == 0.0 {
                 config.adversarial = false;
@@ -207,12 +217,14 @@ pub fn train_vae(
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
     let config = training.config(seed);
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, {}",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, skating weight {}, {}",
         clips.len(),
         config.iterations,
         config.adversarial,
         config.weights.adversarial,
         config.weights.mixed_motion,
+        config.weights.mixed_contact,
+        config.feet.skating,
         if config.features.floor.is_some() {
             "clips on one floor"
         } else {

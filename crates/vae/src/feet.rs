@@ -292,6 +292,16 @@ pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> 
     masked_frame_mean(&per_step, &step_mask(mask)?)
 }
 
+/// Per clip `(B,)`, the share of its valid frames whose lowest foot point (of
+/// `(B, T, P, 3)`) is below `height_m`, smoothly (a logistic step 1 cm wide):
+/// how much of the clip stands on the ground rather than hovering.
+pub fn ground_contact(pos: &Tensor, mask: &Tensor, height_m: f64) -> Result<Tensor> {
+    let lowest = pos.narrow(3, 1, 1)?.squeeze(3)?.min(D::Minus1)?;
+    let touching = candle_nn::ops::sigmoid(&((height_m - lowest)? * 100.0)?)?;
+    let n = mask.sum(1)?.clamp(1.0, f64::INFINITY)?;
+    Ok(((touching * mask)?.sum(1)? / n)?)
+}
+
 /// Mean squared depth (m^2) of foot points below y = 0.
 pub fn floor(pos: &Tensor, mask: &Tensor) -> Result<Tensor> {
     let depth = pos.narrow(3, 1, 1)?.squeeze(3)?.neg()?.relu()?;
@@ -473,5 +483,33 @@ mod tests {
             .to_scalar::<f32>()
             .unwrap();
         assert!((f - 0.01 / 2.0).abs() < 1e-6, "{f}");
+    }
+
+    #[test]
+    fn ground_contact_is_the_share_of_valid_frames_with_a_foot_down() {
+        let dev = &Device::Cpu;
+        // Two clips, four frames, two foot points. Clip 0: one point on the
+        // ground in frames 0-1, both 30 cm up in 2-3. Clip 1: the second
+        // point down throughout, but only 2 frames valid.
+        let frame = |a: f32, b: f32| [0.0, a, 0.0, 0.0, b, 0.0];
+        let pos: Vec<f32> = [
+            frame(0.0, 0.3),
+            frame(0.0, 0.3),
+            frame(0.3, 0.3),
+            frame(0.3, 0.3),
+            frame(0.3, 0.0),
+            frame(0.3, 0.0),
+            frame(0.3, 0.3),
+            frame(0.3, 0.3),
+        ]
+        .concat();
+        let pos = Tensor::from_vec(pos, (2, 4, 2, 3), dev).unwrap();
+        let mask = Tensor::from_vec(vec![1f32, 1., 1., 1., 1., 1., 0., 0.], (2, 4), dev).unwrap();
+        let share = ground_contact(&pos, &mask, 0.05)
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        assert!((share[0] - 0.5).abs() < 0.01, "{share:?}");
+        assert!((share[1] - 1.0).abs() < 0.01, "{share:?}");
     }
 }

@@ -7,8 +7,8 @@
 //! smoothness + KL + the foot terms (`feet`: foot position and velocity of the
 //! reconstructions, skating of the mixed decodes, floor for both) (+ the
 //! adversarial hinge terms) (+ the mixed-code terms: the pose speed of each
-//! mixed decode against its two parents', and adversarial terms on the mixed
-//! decodes). With adversarial training the two discriminators then take one
+//! mixed decode against its two parents', its share of frames with a foot on
+//! the ground against theirs, and adversarial terms on the mixed decodes). With adversarial training the two discriminators then take one
 //! step on real clips vs the (detached) reconstructions (and mixed decodes),
 //! all in one batch. With Adam the rate follows a cosine down to `cosine_to`
 //! of itself.
@@ -152,6 +152,10 @@ pub struct Losses {
     /// Squared relative pose-speed difference of mixed-code decodes (0 when off).
     #[serde(default)]
     pub mixed_motion: f32,
+    /// Squared difference of ground-contact share between mixed-code decodes
+    /// and their parents (0 when off).
+    #[serde(default)]
+    pub mixed_contact: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -379,7 +383,8 @@ impl Trainer {
         // Codes between training clips, decoded in the same pass: they have no
         // captured counterpart, only the skating and floor terms judge them.
         let mixed_adversarial = self.config.adversarial && w.mixed_adversarial > 0.0;
-        let mixed = if (self.feet.is_some() && (wf.skating > 0.0 || wf.floor > 0.0))
+        let mixed = if (self.feet.is_some()
+            && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0))
             || w.mixed_motion > 0.0
             || mixed_adversarial
         {
@@ -419,6 +424,7 @@ impl Trainer {
             total = (total + (term * w.mixed_motion)?)?;
         }
         let mut foot = [0.0f32; 4];
+        let mut mixed_contact = 0.0;
         if let (Some(fk), Some(target)) = (&self.feet, &prepared.feet) {
             let fps = self.config.features.fps;
             let pos_all = fk.positions(&raw_all)?;
@@ -431,6 +437,17 @@ impl Trainer {
                 let pm = pos_all.narrow(0, b, pos_all.dim(0)? - b)?;
                 skating = feet::skating(&pm, &m.mask, fps, wf.contact_height_m)?;
                 floor = (floor + feet::floor(&pm, &m.mask)?)?;
+                if w.mixed_contact > 0.0 {
+                    let h = wf.contact_height_m;
+                    let real = feet::ground_contact(target, &batch.mask, h)?;
+                    let want = ((real.index_select(&m.parents.0, 0)?
+                        + real.index_select(&m.parents.1, 0)?)?
+                        * 0.5)?;
+                    let made = feet::ground_contact(&pm, &m.mask, h)?;
+                    let term = (made - want)?.sqr()?.mean_all()?;
+                    mixed_contact = term.to_scalar::<f32>()?;
+                    total = (total + (term * w.mixed_contact)?)?;
+                }
             }
             foot = [
                 position.to_scalar()?,
@@ -514,6 +531,7 @@ impl Trainer {
             floor: foot[3],
             mixed_adversarial: adv_mixed,
             mixed_motion,
+            mixed_contact,
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {

@@ -354,3 +354,75 @@ fn the_mixed_motion_term_keeps_codes_between_out_of_phase_clips_moving() {
         "pose speed: originals {originals:.3}, samples without the term {off:.3}, with it {on:.3}"
     );
 }
+
+/// A leg with a foot (so the foot terms are on), `lift` m above the ground.
+fn footed_clip(frames: usize, lift: f64, phase: f64) -> Motion {
+    let joint = |name: &str, parent, offset, end_site| Joint {
+        name: name.into(),
+        parent,
+        offset,
+        channels: vec![],
+        end_site,
+        limits: None,
+    };
+    let s = Arc::new(
+        Skeleton::new(
+            vec![
+                joint("hips", None, DVec3::ZERO, None),
+                joint("thigh", Some(0), DVec3::new(0.1, -0.1, 0.0), None),
+                joint("shin", Some(1), DVec3::new(0.0, -0.45, 0.0), None),
+                joint(
+                    "foot",
+                    Some(2),
+                    DVec3::new(0.0, -0.45, 0.0),
+                    Some(DVec3::new(0.0, 0.0, 0.1)),
+                ),
+            ],
+            1.0,
+        )
+        .unwrap(),
+    );
+    let mut root = Vec::new();
+    let mut rot = Vec::new();
+    for t in 0..frames {
+        let u = t as f64 / frames as f64;
+        let swing = 0.3 * (std::f64::consts::TAU * u + phase).sin();
+        root.push(DVec3::new(0.0, 1.0 + lift, 0.5 * u));
+        rot.extend([
+            DQuat::IDENTITY,
+            DQuat::from_rotation_x(-swing),
+            DQuat::from_rotation_x(0.5 * swing.abs()),
+            DQuat::IDENTITY,
+        ]);
+    }
+    Motion::new(s, 30.0, root, rot).unwrap()
+}
+
+#[test]
+fn the_mixed_contact_term_is_reported_and_trained_down_only_when_on() {
+    // Clips standing on the ground and clips hovering 20 cm up: codes between
+    // them are asked to stand on the ground in as many frames as their parents.
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| footed_clip(24, if i % 2 == 0 { 0.0 } else { 0.2 }, i as f64))
+        .collect();
+    let reported = |mixed_contact: f64| {
+        let mut cfg = tiny_config(200);
+        cfg.adversarial = false;
+        cfg.features.floor = None;
+        cfg.weights.mixed_contact = mixed_contact;
+        let mut out = vec![];
+        vae::train(&clips, &cfg, |p| out.push(p.losses.mixed_contact)).unwrap();
+        out
+    };
+    assert!(reported(0.0).iter().all(|&l| l == 0.0));
+    let on = reported(1.0);
+    assert!(on.iter().all(|l| l.is_finite()) && on[0] > 0.0, "{on:?}");
+    let (first, last) = (
+        on[..20].iter().sum::<f32>(),
+        on[on.len() - 20..].iter().sum::<f32>(),
+    );
+    assert!(
+        last < 0.5 * first,
+        "contact term {first} -> {last} over 20 iterations"
+    );
+}

@@ -583,6 +583,14 @@ struct TableArgs {
     /// (crates/vae/README.md, session 18; crates/eval/README.md, jog).
     #[arg(long, default_value_t = TableConfig::default().vae_mixed_motion_weight)]
     vae_mixed_motion_weight: f64,
+    /// Weight of the VAE's ground-contact term on mixed codes (0 = off):
+    /// moving near samples otherwise hover (crates/vae/README.md, session 33).
+    #[arg(long, default_value_t = TableConfig::default().vae_mixed_contact_weight)]
+    vae_mixed_contact_weight: f64,
+    /// Weight of the VAE's skating term on mixed codes (default: the vae
+    /// crate's 0.1).
+    #[arg(long)]
+    vae_skating_weight: Option<f64>,
     /// Low-pass each VAE sample (Gaussian, seconds; 0 = as decoded) before
     /// its root is planted: decoded clips jitter (crates/vae/README.md).
     #[arg(long, default_value_t = TableConfig::default().vae_smooth_s)]
@@ -641,6 +649,8 @@ impl TableArgs {
             vae_ablation: self.vae_ablation,
             vae_near_members: self.vae_near_members,
             vae_mixed_motion_weight: self.vae_mixed_motion_weight,
+            vae_mixed_contact_weight: self.vae_mixed_contact_weight,
+            vae_skating_weight: self.vae_skating_weight,
             vae_smooth_s: self.vae_smooth_s,
             vae_plant_root: !self.vae_no_plant,
             vae_level_floor: !self.vae_captured_floors,

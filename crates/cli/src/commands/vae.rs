@@ -116,6 +116,15 @@ struct TrainArgs {
     /// clips they were drawn between (pose speed).
     #[arg(long)]
     mixed_motion_weight: Option<f64>,
+    /// Weight of the term asking mixed-code decodes to stand on the ground
+    /// in as many frames as the two clips they were drawn between (needs the
+    /// foot terms).
+    #[arg(long)]
+    mixed_contact_weight: Option<f64>,
+    /// Weight of the foot terms' skating of mixed-code decodes (planted feet
+    /// that slide; `vae::FootLoss::skating`).
+    #[arg(long)]
+    skating_weight: Option<f64>,
     /// Train on the clips as captured instead of moving each onto one floor
     /// (its lowest body point at 5 mm in a tenth of its frames; actors of
     /// one dataset stand centimetres apart, and the samples' feet hover).
@@ -221,6 +230,12 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(w) = args.mixed_motion_weight {
         config.weights.mixed_motion = w;
     }
+    if let Some(w) = args.mixed_contact_weight {
+        config.weights.mixed_contact = w;
+    }
+    if let Some(w) = args.skating_weight {
+        config.feet.skating = w;
+    }
     if let Some(n) = args.iterations {
         config.iterations = n;
     }
@@ -244,10 +259,10 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
             let l = p.losses;
             eprintln!(
-                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3}",
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3} contact {:.4}",
                 p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
                 l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor,
-                l.mixed_adversarial, l.mixed_motion
+                l.mixed_adversarial, l.mixed_motion, l.mixed_contact
             );
         }
     })

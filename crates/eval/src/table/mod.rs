@@ -151,6 +151,13 @@ pub struct TableConfig {
     /// nearly frozen, and the correction rejects them (crates/eval/README.md,
     /// jog).
     pub vae_mixed_motion_weight: f64,
+    /// Weight of the VAE's ground-contact term on mixed codes
+    /// (`vae::LossWeights::mixed_contact`; 0: off, the vae crate's default):
+    /// moving jog samples otherwise hover in half their frames.
+    pub vae_mixed_contact_weight: f64,
+    /// Weight of the VAE's skating term on mixed codes (`vae::FootLoss::skating`;
+    /// `None`: the vae crate's 0.1).
+    pub vae_skating_weight: Option<f64>,
     /// Low-pass each VAE sample with a Gaussian of this many seconds before
     /// its root is planted (0: as decoded; `vae::Finish`).
     pub vae_smooth_s: f64,
@@ -200,6 +207,8 @@ impl Default for TableConfig {
             vae_ablation: false,
             vae_near_members: None,
             vae_mixed_motion_weight: 0.0,
+            vae_mixed_contact_weight: 0.0,
+            vae_skating_weight: None,
             vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             vae_plant_root: true,
             vae_level_floor: true,
@@ -252,6 +261,15 @@ impl TableConfig {
         }
         if !(self.vae_mixed_motion_weight.is_finite() && self.vae_mixed_motion_weight >= 0.0) {
             return config("the VAE's mixed-motion weight must be 0 or more");
+        }
+        if !(self.vae_mixed_contact_weight.is_finite() && self.vae_mixed_contact_weight >= 0.0) {
+            return config("the VAE's mixed-contact weight must be 0 or more");
+        }
+        if self
+            .vae_skating_weight
+            .is_some_and(|w| !(w.is_finite() && w >= 0.0))
+        {
+            return config("the VAE's skating weight must be 0 or more");
         }
         self.physics.validate()
     }
@@ -523,6 +541,15 @@ fn made_sets(
         if config.vae_mixed_motion_weight > 0.0 {
             cache_name.push_str(&format!("-mixed-motion-{}", config.vae_mixed_motion_weight));
         }
+        if config.vae_mixed_contact_weight > 0.0 {
+            cache_name.push_str(&format!(
+                "-mixed-contact-{}",
+                config.vae_mixed_contact_weight
+            ));
+        }
+        if let Some(w) = config.vae_skating_weight {
+            cache_name.push_str(&format!("-skating-{w}"));
+        }
         if config.vae_level_floor {
             cache_name.push_str("-one-floor");
         }
@@ -530,6 +557,8 @@ fn made_sets(
             iterations: config.vae_iterations,
             adversarial_weight: weight,
             mixed_motion_weight: config.vae_mixed_motion_weight,
+            mixed_contact_weight: config.vae_mixed_contact_weight,
+            skating_weight: config.vae_skating_weight,
             level_floor: config.vae_level_floor,
         };
         let mut model = cached_vae(&work.join(cache_name), &split.train, &training, log)?;

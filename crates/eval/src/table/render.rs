@@ -46,6 +46,15 @@ impl TableConfig {
             if let Some(n) = c.vae_near_members {
                 map.insert("vae_near_members".into(), json!(n));
             }
+            if c.vae_mixed_contact_weight > 0.0 {
+                map.insert(
+                    "vae_mixed_contact_weight".into(),
+                    json!(c.vae_mixed_contact_weight),
+                );
+            }
+            if let Some(w) = c.vae_skating_weight {
+                map.insert("vae_skating_weight".into(), json!(w));
+            }
             if c.vae_mixed_motion_weight > 0.0 {
                 map.insert(
                     "vae_mixed_motion_weight".into(),
@@ -1034,6 +1043,22 @@ mod tests {
             "a cell made without the term is not reused with it"
         );
         assert_eq!(saved(&t).config["vae_mixed_motion_weight"], 1.0);
+    }
+
+    #[test]
+    fn the_vae_contact_and_skating_weights_are_recorded_only_when_set() {
+        let mut t = table();
+        let off = t.config.cell_key();
+        assert!(off.get("vae_mixed_contact_weight").is_none(), "{off}");
+        assert!(off.get("vae_skating_weight").is_none(), "{off}");
+        t.config.vae_mixed_contact_weight = 1.0;
+        t.config.vae_skating_weight = Some(0.5);
+        let on = t.config.cell_key();
+        assert_eq!(on["vae_mixed_contact_weight"], 1.0);
+        assert_eq!(on["vae_skating_weight"], 0.5);
+        assert_ne!(on, off);
+        t.config.vae_skating_weight = Some(-1.0);
+        assert!(t.config.validate().is_err());
     }
 
     #[test]
