@@ -829,7 +829,10 @@ fn eval_table_tiny_run_has_corrected_and_debiased_rows_and_resumes() {
     // ... and without it, the VAE and the corrections kept in OUT/work: the
     // same sets.
     assert!(out.join("work/bk_sneak/samples").is_dir());
-    assert!(out.join("work/bk_sneak/vae-2it-one-floor/model.json").is_file());
+    assert!(
+        out.join("work/bk_sneak/vae-2it-one-floor/model.json")
+            .is_file()
+    );
     // This time on two threads: the originals' corrections (deleted, so
     // redone) beside the synthesis, the prediction models side by side,
     // give what one after the other gave.

@@ -182,20 +182,7 @@ mod tests {
 
     #[test]
     fn asf_joints_use_the_amc_channels() {
-        let asf = motion::asf::parse(
-            include_bytes!("../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        let m = motion::amc::read(
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../../examples/data/HDM_bd_kickLFront1Reps_001_120.amc"
-            ),
-            &asf,
-            120.0,
-        )
-        .unwrap();
+        let m = crate::example_kick();
         let e = EulerClip::of(&m);
         let knee = m.skeleton().find("ltibia").unwrap() - 1;
         let mut bent = 0.0f64;

@@ -36,6 +36,25 @@ pub mod predict;
 pub mod scores;
 pub mod table;
 
+/// The bundled example kick (bd, 120 fps), for the crate's tests.
+#[cfg(test)]
+pub(crate) fn example_kick() -> motion::Motion {
+    let asf = motion::asf::parse(
+        include_bytes!("../../../examples/data/HDM_bd.asf"),
+        "HDM_bd.asf",
+    )
+    .expect("the bundled skeleton parses");
+    motion::amc::read(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../examples/data/HDM_bd_kickLFront1Reps_001_120.amc"
+        ),
+        &asf,
+        120.0,
+    )
+    .expect("the bundled kick reads")
+}
+
 pub use error::{EvalError, Result};
 
 /// Where progress lines go (the CLI prints them on stderr).

@@ -318,20 +318,7 @@ mod tests {
 
     #[test]
     fn features_convert_back_to_the_same_euler_angles() {
-        let asf = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        let amc = motion::amc::read(
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../../examples/data/HDM_bd_kickLFront1Reps_001_120.amc"
-            ),
-            &asf,
-            120.0,
-        )
-        .unwrap();
+        let amc = crate::example_kick();
         let conv = Convention::of(amc.skeleton());
         let f = features(&amc);
         let d = 3 * (amc.joints() - 1);

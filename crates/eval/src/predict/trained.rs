@@ -273,20 +273,7 @@ mod tests {
     use super::*;
 
     fn kick() -> Motion {
-        let asf = motion::asf::parse(
-            include_bytes!("../../../../examples/data/HDM_bd.asf"),
-            "HDM_bd.asf",
-        )
-        .unwrap();
-        motion::amc::read(
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../../examples/data/HDM_bd_kickLFront1Reps_001_120.amc"
-            ),
-            &asf,
-            120.0,
-        )
-        .unwrap()
+        crate::example_kick()
     }
 
     #[test]
