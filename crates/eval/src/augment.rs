@@ -184,6 +184,29 @@ impl Default for VaeTraining {
 }
 
 impl VaeTraining {
+    /// The folder a model of these settings is kept in, `tag` (`vae`,
+    /// `vae_noadv`) first: models of other settings never share one.
+    pub fn folder_name(&self, tag: &str) -> String {
+        let mut name = format!("{tag}-{}it", self.iterations);
+        if self.mixed_motion_weight > 0.0 {
+            name.push_str(&format!("-mixed-motion-{}", self.mixed_motion_weight));
+        }
+        if self.mixed_contact_weight > 0.0 {
+            name.push_str(&format!("-mixed-contact-{}", self.mixed_contact_weight));
+        }
+        if let Some(w) = self.skating_weight {
+            name.push_str(&format!("-skating-{w}"));
+        }
+        if self.level_floor {
+            name.push_str("-one-floor");
+        }
+        name
+    }
+
+    fn floor(&self) -> Option<vae::FloorLevel> {
+        self.level_floor.then(vae::FloorLevel::default)
+    }
+
     fn config(&self, seed: u64) -> VaeTrainConfig {
         let mut config = VaeTrainConfig {
             iterations: self.iterations.max(1),
@@ -202,7 +225,7 @@ impl VaeTraining {
                 config.weights.adversarial = w;
             }
         }
-        config.features.floor = self.level_floor.then(vae::FloorLevel::default);
+        config.features.floor = self.floor();
         config
     }
 }
@@ -261,7 +284,7 @@ pub fn cached_vae(
     if dir.join(vae::trained::META_FILE).is_file() {
         log(&format!("vae: reusing {}", dir.display()));
         let model = TrainedVae::load(dir)?;
-        let wanted = training.config(0).features.floor;
+        let wanted = training.floor();
         if model.meta().features.floor != wanted {
             return Err(EvalError::Config(format!(
                 "the VAE in {} was trained with floor levelling {:?}, this run asks for {:?}: \
@@ -301,6 +324,24 @@ mod tests {
 
     fn kick() -> Vec<(String, Motion)> {
         vec![("kick".into(), crate::example_kick())]
+    }
+
+    #[test]
+    fn each_setting_that_changes_the_model_names_its_folder() {
+        let plain = VaeTraining::default();
+        assert_eq!(plain.folder_name("vae"), "vae-1500it-one-floor");
+        let all = VaeTraining {
+            iterations: 300,
+            mixed_motion_weight: 1.0,
+            mixed_contact_weight: 0.3,
+            skating_weight: Some(0.3),
+            level_floor: false,
+            ..plain
+        };
+        assert_eq!(
+            all.folder_name("vae_noadv"),
+            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-skating-0.3"
+        );
     }
 
     #[test]

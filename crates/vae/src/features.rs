@@ -73,9 +73,9 @@ impl FeatureConfig {
 /// Why: the actors of a class stand on floors that differ by centimetres
 /// (HDM05 jog: the 10th percentile of the lowest point is 5-14 mm for bk,
 /// 21-26 mm for mm, 33-38 mm for dg and tr). Trained on them as captured, fold
-/// bd's VAE decoded jog samples floating in 42 % of frames and skating
-/// 0.100 m/s; on one floor 29 % and 0.070 m/s at the same pose speed
-/// (crates/vae/README.md). A quantile rather than the minimum, so that a toe
+/// bd's VAE decoded jog samples floating in 55 % of frames and skating
+/// 0.098 m/s; on one floor 46 % and 0.072 m/s at the same pose speed
+/// (crates/vae/README.md, session 33). A quantile rather than the minimum, so that a toe
 /// dipping through the floor in a frame or two does not lift the whole clip;
 /// a low one, so that a clip with flight phases stands on its stance frames.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -8,8 +8,9 @@
 //! reconstructions, skating of the mixed decodes, floor for both) (+ the
 //! adversarial hinge terms) (+ the mixed-code terms: the pose speed of each
 //! mixed decode against its two parents', its share of frames with a foot on
-//! the ground against theirs, and adversarial terms on the mixed decodes). With adversarial training the two discriminators then take one
-//! step on real clips vs the (detached) reconstructions (and mixed decodes),
+//! the ground against theirs, and adversarial terms on the mixed decodes).
+//! With adversarial training the two discriminators then take one step on
+//! real clips vs the (detached) reconstructions (and mixed decodes),
 //! all in one batch. With Adam the rate follows a cosine down to `cosine_to`
 //! of itself.
 
@@ -194,6 +195,9 @@ struct Prepared {
     /// Pose speed of each clip `(B,)` (when the mixed-motion term is on):
     /// what its mixed decodes are asked to match.
     pose_speed: Option<Tensor>,
+    /// Share of each clip's frames with a foot on the ground `(B,)` (when the
+    /// mixed-contact term is on): what its mixed decodes are asked to match.
+    ground_contact: Option<Tensor>,
 }
 
 impl Prepared {
@@ -201,18 +205,27 @@ impl Prepared {
         batch: Batch,
         feet: Option<&FootKinematics>,
         joints: Option<&FootKinematics>,
-        fps: f64,
+        config: &TrainConfig,
     ) -> Result<Self> {
         let rotations = loss::rotation_matrices(&batch.raw)?;
         let feet = feet.map(|fk| fk.positions(&batch.raw)).transpose()?;
         let pose_speed = joints
-            .map(|jk| pose_speed(jk, &batch.raw, &batch.mask, fps))
+            .map(|jk| pose_speed(jk, &batch.raw, &batch.mask, config.features.fps))
             .transpose()?;
+        let ground_contact = match &feet {
+            Some(pos) if config.weights.mixed_contact > 0.0 => Some(feet::ground_contact(
+                pos,
+                &batch.mask,
+                config.feet.contact_height_m,
+            )?),
+            _ => None,
+        };
         Ok(Prepared {
             batch,
             rotations,
             feet,
             pose_speed,
+            ground_contact,
         })
     }
 }
@@ -230,6 +243,16 @@ struct Mixed {
     mask: Tensor,
     /// Batch indices `(B,)` of the two parent clips (`u32`).
     parents: (Tensor, Tensor),
+}
+
+impl Mixed {
+    /// Per mixed code `(B,)`, the mean of a per-clip quantity `(B,)` over its
+    /// two parent clips: what the mixed-code terms ask each decode to match.
+    fn parents_mean(&self, per_clip: &Tensor) -> Result<Tensor> {
+        Ok(((per_clip.index_select(&self.parents.0, 0)?
+            + per_clip.index_select(&self.parents.1, 0)?)?
+            * 0.5)?)
+    }
 }
 
 impl Trainer {
@@ -264,7 +287,7 @@ impl Trainer {
                 data.batch(&all)?,
                 feet.as_ref(),
                 joints.as_ref(),
-                config.features.fps,
+                config,
             )?)
         } else {
             None
@@ -298,6 +321,7 @@ impl Trainer {
                 rotations: p.rotations.clone(),
                 feet: p.feet.clone(),
                 pose_speed: p.pose_speed.clone(),
+                ground_contact: p.ground_contact.clone(),
             });
         }
         let bs = self.config.batch_size;
@@ -311,7 +335,7 @@ impl Trainer {
             self.data.batch(&idx)?,
             self.feet.as_ref(),
             self.joints.as_ref(),
-            self.config.features.fps,
+            &self.config,
         )
     }
 
@@ -381,7 +405,8 @@ impl Trainer {
         let z = nn::reparameterise(&mu, &logvar, &eps)?;
         let frames = batch.x.dim(1)?;
         // Codes between training clips, decoded in the same pass: they have no
-        // captured counterpart, only the skating and floor terms judge them.
+        // captured counterpart, only the mixed-code terms (skating, floor,
+        // pose speed, ground contact, adversarial) judge them.
         let mixed_adversarial = self.config.adversarial && w.mixed_adversarial > 0.0;
         let mixed = if (self.feet.is_some()
             && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0))
@@ -415,9 +440,7 @@ impl Trainer {
         if let (Some(m), Some(jk), Some(real)) = (&mixed, &self.joints, &prepared.pose_speed) {
             let raw_mixed = raw_all.narrow(0, b, b)?;
             let moving = pose_speed(jk, &raw_mixed, &m.mask, self.config.features.fps)?;
-            let target = ((real.index_select(&m.parents.0, 0)?
-                + real.index_select(&m.parents.1, 0)?)?
-                * 0.5)?;
+            let target = m.parents_mean(real)?;
             let rel = ((moving - &target)? / target.clamp(1e-3, f64::INFINITY)?)?;
             let term = rel.sqr()?.mean_all()?;
             mixed_motion = term.to_scalar::<f32>()?;
@@ -437,13 +460,9 @@ impl Trainer {
                 let pm = pos_all.narrow(0, b, pos_all.dim(0)? - b)?;
                 skating = feet::skating(&pm, &m.mask, fps, wf.contact_height_m)?;
                 floor = (floor + feet::floor(&pm, &m.mask)?)?;
-                if w.mixed_contact > 0.0 {
-                    let h = wf.contact_height_m;
-                    let real = feet::ground_contact(target, &batch.mask, h)?;
-                    let want = ((real.index_select(&m.parents.0, 0)?
-                        + real.index_select(&m.parents.1, 0)?)?
-                        * 0.5)?;
-                    let made = feet::ground_contact(&pm, &m.mask, h)?;
+                if let Some(real) = &prepared.ground_contact {
+                    let want = m.parents_mean(real)?;
+                    let made = feet::ground_contact(&pm, &m.mask, wf.contact_height_m)?;
                     let term = (made - want)?.sqr()?.mean_all()?;
                     mixed_contact = term.to_scalar::<f32>()?;
                     total = (total + (term * w.mixed_contact)?)?;

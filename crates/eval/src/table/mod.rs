@@ -170,8 +170,8 @@ pub struct TableConfig {
     /// Put the VAE's training clips on one floor (`vae::FloorLevel`, the vae
     /// crate's default); off, each stands as captured (tables made before
     /// session 33). HDM05's actors stand 0-3 cm apart in height, and fold
-    /// bd's jog samples floated in 42 % of frames on the captured floors,
-    /// 29 % on one (crates/vae/README.md).
+    /// bd's jog samples floated in 55 % of frames on the captured floors,
+    /// 46 % on one (crates/vae/README.md).
     pub vae_level_floor: bool,
     /// Train and score the prediction models (else synthesis metrics only).
     pub predict: bool,
@@ -537,22 +537,6 @@ fn made_sets(
     let finish = vae::Finish::new(config.vae_smooth_s, config.vae_plant_root);
     for (tag, weight) in vae_runs {
         let t = Instant::now();
-        let mut cache_name = format!("{tag}-{}it", config.vae_iterations);
-        if config.vae_mixed_motion_weight > 0.0 {
-            cache_name.push_str(&format!("-mixed-motion-{}", config.vae_mixed_motion_weight));
-        }
-        if config.vae_mixed_contact_weight > 0.0 {
-            cache_name.push_str(&format!(
-                "-mixed-contact-{}",
-                config.vae_mixed_contact_weight
-            ));
-        }
-        if let Some(w) = config.vae_skating_weight {
-            cache_name.push_str(&format!("-skating-{w}"));
-        }
-        if config.vae_level_floor {
-            cache_name.push_str("-one-floor");
-        }
         let training = VaeTraining {
             iterations: config.vae_iterations,
             adversarial_weight: weight,
@@ -561,7 +545,8 @@ fn made_sets(
             skating_weight: config.vae_skating_weight,
             level_floor: config.vae_level_floor,
         };
-        let mut model = cached_vae(&work.join(cache_name), &split.train, &training, log)?;
+        let folder = work.join(training.folder_name(tag));
+        let mut model = cached_vae(&folder, &split.train, &training, log)?;
         if let Some(members) = config.vae_near_members {
             model = model.with_near_members(members)?;
         }
