@@ -268,6 +268,42 @@ fn metrics_json_reports_plausibility() {
         "{v}"
     );
     assert!(v.as_object().unwrap().len() > 5);
+    assert!(v.get("soles").is_none(), "soles only when asked: {v}");
+}
+
+#[test]
+fn metrics_scores_the_soles_criterion_on_the_clip_itself() {
+    let text = ok(motionaug(&[
+        "metrics",
+        JOG,
+        "--skeleton",
+        ASF,
+        "--json",
+        "--soles",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let s = &v["soles"];
+    let planted = s["planted_frames"].as_u64().unwrap();
+    let flat = s["flat_frames"].as_u64().unwrap();
+    // A captured jog stands on its feet, mostly on the flat sole; the
+    // others stood on a heel or on the toes.
+    assert!(planted > 10 && flat <= planted, "{s}");
+    let tilted = s["on_toes_frames"].as_u64().unwrap() + s["on_heel_frames"].as_u64().unwrap();
+    assert_eq!(flat + tilted, planted, "{s}");
+    assert!(
+        tilted == 0 || s["mean_lift_m"].as_f64().unwrap() > 0.02,
+        "{s}"
+    );
+    let fraction = s["flat_fraction"].as_f64().unwrap();
+    assert!(
+        (fraction - flat as f64 / planted as f64).abs() < 1e-12,
+        "{s}"
+    );
+    assert!(fraction > 0.5, "{s}");
+    assert_eq!(s["min_flat_fraction"], 0.9);
+    // The plain table names the nested figures.
+    let table = ok(motionaug(&["metrics", JOG, "--skeleton", ASF, "--soles"]));
+    assert!(table.contains("soles.flat_fraction"), "{table}");
 }
 
 #[test]

@@ -146,11 +146,22 @@ impl Criterion {
     }
 }
 
-/// Planted foot frames and how many stood on their soles.
+/// Planted foot frames and how many stood on their soles; of the others,
+/// which end was up (to tell a foot on its toes from one on its heel).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct SoleStats {
     pub planted_frames: usize,
     pub flat_frames: usize,
+    /// Planted, not flat, the heel the higher end: standing on the toes.
+    #[serde(default)]
+    pub on_toes_frames: usize,
+    /// Planted, not flat, the toe the higher end: standing on the heel.
+    #[serde(default)]
+    pub on_heel_frames: usize,
+    /// Sum over the planted frames that are not flat of the height of the
+    /// higher end, m (see [`SoleStats::mean_lift_m`]).
+    #[serde(default)]
+    pub lift_sum_m: f64,
 }
 
 impl SoleStats {
@@ -160,12 +171,31 @@ impl SoleStats {
         for f in feet.iter().flatten() {
             if f.touching && (f.speed_m_s as f64) < config.planted_speed_m_s {
                 s.planted_frames += 1;
-                if (f.heel_m.max(f.toe_m) as f64) <= config.sole_tolerance_m {
+                let high = f.heel_m.max(f.toe_m) as f64;
+                if high <= config.sole_tolerance_m {
                     s.flat_frames += 1;
+                } else {
+                    s.lift_sum_m += high;
+                    if f.heel_m > f.toe_m {
+                        s.on_toes_frames += 1;
+                    } else {
+                        s.on_heel_frames += 1;
+                    }
                 }
             }
         }
         s
+    }
+
+    /// Mean height of the higher end of a planted foot that is not flat, m
+    /// (0 when every planted frame is flat).
+    pub fn mean_lift_m(&self) -> f64 {
+        let tilted = self.planted_frames - self.flat_frames;
+        if tilted == 0 {
+            0.0
+        } else {
+            self.lift_sum_m / tilted as f64
+        }
     }
 
     /// Flat fraction of the planted frames (1 without planted frames: nothing
@@ -303,12 +333,17 @@ mod tests {
             vec![foot(0.0, 0.06, 0.05, true), foot(0.25, 0.2, 1.5, false)],
             // Touching but sliding fast: not planted.
             vec![foot(0.0, 0.0, 0.5, true), foot(0.0, 0.07, 0.0, true)],
+            // On the toes, heel 4 cm up.
+            vec![foot(0.04, 0.01, 0.1, true), foot(0.3, 0.3, 2.0, false)],
         ];
         let s = SoleStats::of(&feet, &c);
-        assert_eq!(s.planted_frames, 3);
+        assert_eq!(s.planted_frames, 4);
         assert_eq!(s.flat_frames, 1);
-        assert!((s.flat_fraction() - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!((s.on_heel_frames, s.on_toes_frames), (2, 1));
+        assert!((s.mean_lift_m() - (0.06 + 0.07 + 0.04) / 3.0).abs() < 1e-6);
+        assert!((s.flat_fraction() - 1.0 / 4.0).abs() < 1e-12);
         assert_eq!(SoleStats::default().flat_fraction(), 1.0);
+        assert_eq!(SoleStats::default().mean_lift_m(), 0.0);
     }
 
     #[test]
