@@ -162,6 +162,8 @@ pub struct VaeTraining {
     pub mixed_motion_weight: f64,
     /// `vae::LossWeights::mixed_contact` (0: off, the vae crate's default).
     pub mixed_contact_weight: f64,
+    /// `vae::LossWeights::mixed_sole` (0: off, the vae crate's default).
+    pub mixed_sole_weight: f64,
     /// `vae::FootLoss::skating` (`None`: the vae crate's default).
     pub skating_weight: Option<f64>,
     /// Put the training clips on one floor (`vae::FloorLevel`, the vae
@@ -177,6 +179,7 @@ impl Default for VaeTraining {
             adversarial_weight: None,
             mixed_motion_weight: 0.0,
             mixed_contact_weight: 0.0,
+            mixed_sole_weight: 0.0,
             skating_weight: None,
             level_floor: true,
         }
@@ -193,6 +196,9 @@ impl VaeTraining {
         }
         if self.mixed_contact_weight > 0.0 {
             name.push_str(&format!("-mixed-contact-{}", self.mixed_contact_weight));
+        }
+        if self.mixed_sole_weight > 0.0 {
+            name.push_str(&format!("-mixed-sole-{}", self.mixed_sole_weight));
         }
         if let Some(w) = self.skating_weight {
             name.push_str(&format!("-skating-{w}"));
@@ -215,6 +221,7 @@ impl VaeTraining {
         };
         config.weights.mixed_motion = self.mixed_motion_weight;
         config.weights.mixed_contact = self.mixed_contact_weight;
+        config.weights.mixed_sole = self.mixed_sole_weight;
         if let Some(w) = self.skating_weight {
             config.feet.skating = w;
         }
@@ -240,13 +247,14 @@ pub fn train_vae(
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
     let config = training.config(seed);
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, skating weight {}, {}",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, skating weight {}, {}",
         clips.len(),
         config.iterations,
         config.adversarial,
         config.weights.adversarial,
         config.weights.mixed_motion,
         config.weights.mixed_contact,
+        config.weights.mixed_sole,
         config.feet.skating,
         if config.features.floor.is_some() {
             "clips on one floor"
@@ -334,13 +342,14 @@ mod tests {
             iterations: 300,
             mixed_motion_weight: 1.0,
             mixed_contact_weight: 0.3,
+            mixed_sole_weight: 0.5,
             skating_weight: Some(0.3),
             level_floor: false,
             ..plain
         };
         assert_eq!(
             all.folder_name("vae_noadv"),
-            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-skating-0.3"
+            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-mixed-sole-0.5-skating-0.3"
         );
     }
 

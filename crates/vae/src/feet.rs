@@ -110,6 +110,66 @@ pub struct FootKinematics {
     /// (`u32`): one `index_select` instead of a slice per joint of all 31,
     /// whose backward passes each padded their gradient to the whole frame.
     columns: Tensor,
+    /// One per foot (a foot joint whose parent is not one): see [`Sole`].
+    soles: Vec<Sole>,
+}
+
+/// The points of one foot, as indices into [`FootKinematics::positions`]'
+/// point axis.
+///
+/// Why: the correction's soles criterion judges the simulated foot box,
+/// which is fixed to the ankle joint's frame; its heel and toe are level
+/// when the ankle's pitch is the stance pitch. The drop from the ankle to
+/// the point fixed in the same frame farthest from it (HDM05: the toes
+/// joint; a toe bend does not move it) measures that pitch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sole {
+    /// Every point of this foot (ankle, toes, end sites): `u32` indices for
+    /// the lowest point of the foot.
+    pub points: Vec<u32>,
+    /// The ankle joint's own position.
+    pub ankle: usize,
+    /// The point fixed in the ankle's frame farthest from it.
+    pub toe: usize,
+}
+
+/// The feet of `points` (`skeleton_foot_points`): each foot joint whose
+/// parent is not a foot joint, with the points below it.
+fn soles_of(skeleton: &Skeleton, points: &[(usize, Option<motion::glam::DVec3>)]) -> Vec<Sole> {
+    let is_foot = |j: usize| points.iter().any(|&(p, _)| p == j);
+    let top = |mut j: usize| {
+        while let Some(p) = skeleton.parent(j).filter(|&p| is_foot(p)) {
+            j = p;
+        }
+        j
+    };
+    let mut soles = Vec::new();
+    for (ankle, &(a, site)) in points.iter().enumerate() {
+        if site.is_some() || top(a) != a {
+            continue;
+        }
+        // Fixed in the ankle's frame: its end site and its children's origins.
+        let fixed = points
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &(j, e))| match e {
+                Some(e) if j == a => Some((i, e.length())),
+                None if skeleton.parent(j) == Some(a) => {
+                    Some((i, skeleton.joint(j).offset.length()))
+                }
+                _ => None,
+            });
+        let Some((toe, _)) = fixed.max_by(|x, y| x.1.total_cmp(&y.1)) else {
+            continue;
+        };
+        let mine = points.iter().enumerate().filter(|(_, (j, _))| top(*j) == a);
+        soles.push(Sole {
+            points: mine.map(|(i, _)| i as u32).collect(),
+            ankle,
+            toe,
+        });
+    }
+    soles
 }
 
 /// A constant offset as a row vector.
@@ -143,6 +203,7 @@ impl FootKinematics {
             });
         }
         let points = feet.iter().map(|&(j, e)| (index[j], e.map(row))).collect();
+        let soles = soles_of(skeleton, &feet);
         let columns: Vec<u32> = chain
             .iter()
             .flat_map(|c| (0..6).map(move |k| (3 + 6 * c.joint + k) as u32))
@@ -153,6 +214,7 @@ impl FootKinematics {
             chain,
             points,
             columns,
+            soles,
         }))
     }
 
@@ -175,11 +237,17 @@ impl FootKinematics {
             points: (0..skeleton.len()).map(|c| (c, None)).collect(),
             chain,
             columns: Tensor::from_vec(columns, 6 * skeleton.len(), &Device::Cpu)?,
+            soles: Vec::new(),
         })
     }
 
     pub fn points(&self) -> usize {
         self.points.len()
+    }
+
+    /// The feet, for the sole terms (empty for [`FootKinematics::all_joints`]).
+    pub fn soles(&self) -> &[Sole] {
+        &self.soles
     }
 
     /// World positions `(B, T, P, 3)` of the foot points of raw frames
@@ -300,6 +368,89 @@ pub fn ground_contact(pos: &Tensor, mask: &Tensor, height_m: f64) -> Result<Tens
     let touching = candle_nn::ops::sigmoid(&((height_m - lowest)? * 100.0)?)?;
     let n = mask.sum(1)?.clamp(1.0, f64::INFINITY)?;
     Ok(((touching * mask)?.sum(1)? / n)?)
+}
+
+/// Per foot `(B, T - 1, F)` for each valid step `t -> t+1`, how planted the
+/// foot is, detached: its lowest point below `contact_height_m` in both
+/// frames (a logistic step 1 cm wide) and its fastest point slower than
+/// `PLANTED_SPEED_M_S` (a logistic step 5 cm/s wide); the correction's
+/// criterion calls a foot planted when it touches and heel and toe are
+/// slower than 0.2 m/s. And the drop from ankle to toe `(B, T - 1, F)` at
+/// frame `t + 1`, m.
+fn planted_drop(
+    pos: &Tensor,
+    soles: &[Sole],
+    fps: f64,
+    contact_height_m: f64,
+) -> Result<(Tensor, Tensor)> {
+    let t = pos.dim(1)?;
+    let dev = pos.device();
+    let y = pos.narrow(3, 1, 1)?.squeeze(3)?.contiguous()?;
+    let speed = (velocities(&pos.detach(), fps)?.sqr()?.sum(D::Minus1)? + 1e-12)?
+        .sqrt()?
+        .contiguous()?;
+    let (mut weight, mut drop) = (Vec::new(), Vec::new());
+    for s in soles {
+        let idx = Tensor::new(s.points.as_slice(), dev)?;
+        let low = y.detach().index_select(&idx, 2)?.min(D::Minus1)?;
+        let high = low
+            .narrow(1, 1, t - 1)?
+            .maximum(&low.narrow(1, 0, t - 1)?)?;
+        let touching = candle_nn::ops::sigmoid(&((contact_height_m - high)? * 100.0)?)?;
+        let fastest = speed.index_select(&idx, 2)?.max(D::Minus1)?;
+        let slow = candle_nn::ops::sigmoid(&((PLANTED_SPEED_M_S - fastest)? * 20.0)?)?;
+        weight.push((touching * slow)?);
+        let d = (y.narrow(2, s.ankle, 1)? - y.narrow(2, s.toe, 1)?)?.squeeze(2)?;
+        drop.push(d.narrow(1, 1, t - 1)?);
+    }
+    Ok((Tensor::stack(&weight, 2)?, Tensor::stack(&drop, 2)?))
+}
+
+/// A foot faster than this (its fastest point, 3D) is not planted, m/s.
+const PLANTED_SPEED_M_S: f64 = 0.2;
+
+/// Per foot `(F,)`, the mean ankle-to-toe drop (m) over the planted steps of
+/// clips `(B, T, P, 3)`: how the skeleton stands on its soles in the
+/// training clips; what [`sole_level`] holds decodes to. A foot never
+/// planted gets 0 weight and the mean of nothing, 0.
+pub fn stance_drop(
+    pos: &Tensor,
+    mask: &Tensor,
+    soles: &[Sole],
+    fps: f64,
+    contact_height_m: f64,
+) -> Result<Tensor> {
+    if pos.dim(1)? < 2 || soles.is_empty() {
+        return Ok(Tensor::zeros(soles.len(), pos.dtype(), pos.device())?);
+    }
+    let (w, d) = planted_drop(pos, soles, fps, contact_height_m)?;
+    let w = w.broadcast_mul(&step_mask(mask)?.unsqueeze(2)?)?;
+    let total = w.sum((0, 1))?;
+    Ok(((w * d)?.sum((0, 1))? / total.clamp(1e-6, f64::INFINITY)?)?)
+}
+
+/// Planted-weighted mean squared difference between each foot's ankle-to-toe
+/// drop and the stance drop `(F,)`, in units of `tolerance_m` squared (a
+/// foot pitched by the tolerance costs 1): asks a foot that stands to stand
+/// on its sole, not on its heel or its toe. 0 with no planted step.
+pub fn sole_level(
+    pos: &Tensor,
+    mask: &Tensor,
+    soles: &[Sole],
+    stance: &Tensor,
+    fps: f64,
+    contact_height_m: f64,
+    tolerance_m: f64,
+) -> Result<Tensor> {
+    if pos.dim(1)? < 2 || soles.is_empty() {
+        return Ok(Tensor::zeros((), pos.dtype(), pos.device())?);
+    }
+    let (w, d) = planted_drop(pos, soles, fps, contact_height_m)?;
+    let w = w.broadcast_mul(&step_mask(mask)?.unsqueeze(2)?)?;
+    let e = (d.broadcast_sub(stance)? / tolerance_m)?.sqr()?;
+    // A thousandth of a planted step: no planted step gives ~0, not 0 / 0.
+    let total = w.sum_all()?.clamp(1e-3, f64::INFINITY)?;
+    Ok(((w * e)?.sum_all()? / total)?)
 }
 
 /// Mean squared depth (m^2) of foot points below y = 0.
@@ -511,5 +662,82 @@ mod tests {
             .unwrap();
         assert!((share[0] - 0.5).abs() < 0.01, "{share:?}");
         assert!((share[1] - 1.0).abs() < 0.01, "{share:?}");
+    }
+
+    #[test]
+    fn each_foot_pairs_its_ankle_with_the_farthest_point_fixed_to_it() {
+        // The leg: one foot joint with an end site, which is its toe.
+        let fk = FootKinematics::new(&leg()).unwrap().unwrap();
+        assert_eq!(
+            fk.soles(),
+            &[Sole {
+                points: vec![0, 1],
+                ankle: 0,
+                toe: 1
+            }]
+        );
+        // HDM05: lfoot and rfoot, each with its toes joint (fixed in the
+        // foot's frame) rather than the toes' end site (which a toe bend moves).
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+        let path = dir.join("HDM_bd.asf");
+        let asf = motion::asf::parse(&std::fs::read(&path).unwrap(), &path).unwrap();
+        let skeleton = asf.skeleton().clone();
+        let points = motion::metrics::skeleton_foot_points(&skeleton);
+        let fk = FootKinematics::new(&skeleton).unwrap().unwrap();
+        let named = |i: usize| {
+            let (j, site) = points[i];
+            (skeleton.joint(j).name.clone(), site.is_some())
+        };
+        let feet: Vec<_> = fk
+            .soles()
+            .iter()
+            .map(|s| (named(s.ankle), named(s.toe), s.points.len()))
+            .collect();
+        assert_eq!(
+            feet,
+            [
+                (("lfoot".into(), false), ("ltoes".into(), false), 3),
+                (("rfoot".into(), false), ("rtoes".into(), false), 3),
+            ]
+        );
+    }
+
+    #[test]
+    fn sole_level_weighs_planted_steps_only() {
+        let dev = &Device::Cpu;
+        let sole = [Sole {
+            points: vec![0, 1],
+            ankle: 0,
+            toe: 1,
+        }];
+        // One foot: ankle at `a` m, toe at `b` m, still unless `dx` per frame.
+        let clip = |frames: &[(f32, f32, f32)]| {
+            let mut x = 0.0;
+            let mut v = Vec::new();
+            for &(a, b, dx) in frames {
+                x += dx;
+                v.extend([x, a, 0.0, x + 0.15, b, 0.0]);
+            }
+            Tensor::from_vec(v, (1, frames.len(), 2, 3), dev).unwrap()
+        };
+        let mask = Tensor::ones((1, 4), candle_core::DType::F32, dev).unwrap();
+        let standing = clip(&[(0.08, 0.0, 0.0); 4]);
+        let stance = stance_drop(&standing, &mask, &sole, 120.0, 0.05).unwrap();
+        let stance_v = stance.to_vec1::<f32>().unwrap();
+        assert!((stance_v[0] - 0.08).abs() < 1e-4, "{stance_v:?}");
+        let level = |pos: &Tensor| {
+            sole_level(pos, &mask, &sole, &stance, 120.0, 0.05, 0.02)
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap()
+        };
+        assert!(level(&standing) < 1e-6);
+        // Toe 2 cm higher than standing: one tolerance off in every planted
+        // step; 4 cm: four.
+        assert!((level(&clip(&[(0.07, 0.01, 0.0); 4])) - 1.0).abs() < 1e-3);
+        assert!((level(&clip(&[(0.06, 0.02, 0.0); 4])) - 4.0).abs() < 1e-3);
+        // The same pitch in the air, or sliding at 1.2 m/s, is not standing.
+        assert!(level(&clip(&[(0.37, 0.31, 0.0); 4])) < 1e-3);
+        assert!(level(&clip(&[(0.07, 0.01, 0.01); 4])) < 1e-3);
     }
 }

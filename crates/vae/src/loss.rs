@@ -45,6 +45,16 @@ pub struct LossWeights {
     /// (crates/vae/README.md, session 33). 0: off.
     #[serde(default)]
     pub mixed_contact: f64,
+    /// On how far a mixed-code decode's planted feet are from standing on
+    /// their soles (`feet::sole_level`): the ankle-to-toe drop of a foot that
+    /// is low and slow, against the training clips' mean stance drop, in
+    /// units of the correction's 2 cm sole tolerance. Needs the foot terms.
+    /// With the ground-contact term alone, decoded jog samples met "a foot
+    /// point down" with a heel or a toe: 15 % of their planted frames on the
+    /// flat sole against the captures' 80 % (crates/vae/README.md, session
+    /// 33). 0: off.
+    #[serde(default)]
+    pub mixed_sole: f64,
 }
 
 impl Default for LossWeights {
@@ -56,6 +66,7 @@ impl Default for LossWeights {
             mixed_adversarial: 0.0,
             mixed_motion: 0.0,
             mixed_contact: 0.0,
+            mixed_sole: 0.0,
         }
     }
 }
@@ -71,6 +82,7 @@ impl LossWeights {
                 ("mixed_adversarial", self.mixed_adversarial),
                 ("mixed_motion", self.mixed_motion),
                 ("mixed_contact", self.mixed_contact),
+                ("mixed_sole", self.mixed_sole),
             ],
         )
     }

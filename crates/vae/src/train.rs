@@ -157,6 +157,10 @@ pub struct Losses {
     /// and their parents (0 when off).
     #[serde(default)]
     pub mixed_contact: f32,
+    /// Planted-weighted squared ankle-to-toe drop error of mixed-code decodes,
+    /// in units of the 2 cm sole tolerance (0 when off).
+    #[serde(default)]
+    pub mixed_sole: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -198,7 +202,14 @@ struct Prepared {
     /// Share of each clip's frames with a foot on the ground `(B,)` (when the
     /// mixed-contact term is on): what its mixed decodes are asked to match.
     ground_contact: Option<Tensor>,
+    /// Mean ankle-to-toe drop of the batch's planted feet `(F,)` (when the
+    /// mixed-sole term is on): how the skeleton stands on its soles.
+    stance_drop: Option<Tensor>,
 }
+
+/// The correction's sole tolerance (`correct::AcceptanceConfig::sole_tolerance_m`),
+/// the unit of the mixed-sole term.
+const SOLE_TOLERANCE_M: f64 = 0.02;
 
 impl Prepared {
     fn new(
@@ -208,6 +219,7 @@ impl Prepared {
         config: &TrainConfig,
     ) -> Result<Self> {
         let rotations = loss::rotation_matrices(&batch.raw)?;
+        let kinematics = feet;
         let feet = feet.map(|fk| fk.positions(&batch.raw)).transpose()?;
         let pose_speed = joints
             .map(|jk| pose_speed(jk, &batch.raw, &batch.mask, config.features.fps))
@@ -220,12 +232,23 @@ impl Prepared {
             )?),
             _ => None,
         };
+        let stance_drop = match (&feet, kinematics) {
+            (Some(pos), Some(fk)) if config.weights.mixed_sole > 0.0 => Some(feet::stance_drop(
+                pos,
+                &batch.mask,
+                fk.soles(),
+                config.features.fps,
+                config.feet.contact_height_m,
+            )?),
+            _ => None,
+        };
         Ok(Prepared {
             batch,
             rotations,
             feet,
             pose_speed,
             ground_contact,
+            stance_drop,
         })
     }
 }
@@ -322,6 +345,7 @@ impl Trainer {
                 feet: p.feet.clone(),
                 pose_speed: p.pose_speed.clone(),
                 ground_contact: p.ground_contact.clone(),
+                stance_drop: p.stance_drop.clone(),
             });
         }
         let bs = self.config.batch_size;
@@ -409,7 +433,7 @@ impl Trainer {
         // pose speed, ground contact, adversarial) judge them.
         let mixed_adversarial = self.config.adversarial && w.mixed_adversarial > 0.0;
         let mixed = if (self.feet.is_some()
-            && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0))
+            && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0 || w.mixed_sole > 0.0))
             || w.mixed_motion > 0.0
             || mixed_adversarial
         {
@@ -448,6 +472,7 @@ impl Trainer {
         }
         let mut foot = [0.0f32; 4];
         let mut mixed_contact = 0.0;
+        let mut mixed_sole = 0.0;
         if let (Some(fk), Some(target)) = (&self.feet, &prepared.feet) {
             let fps = self.config.features.fps;
             let pos_all = fk.positions(&raw_all)?;
@@ -466,6 +491,19 @@ impl Trainer {
                     let term = (made - want)?.sqr()?.mean_all()?;
                     mixed_contact = term.to_scalar::<f32>()?;
                     total = (total + (term * w.mixed_contact)?)?;
+                }
+                if let Some(stance) = &prepared.stance_drop {
+                    let term = feet::sole_level(
+                        &pm,
+                        &m.mask,
+                        fk.soles(),
+                        stance,
+                        fps,
+                        wf.contact_height_m,
+                        SOLE_TOLERANCE_M,
+                    )?;
+                    mixed_sole = term.to_scalar::<f32>()?;
+                    total = (total + (term * w.mixed_sole)?)?;
                 }
             }
             foot = [
@@ -551,6 +589,7 @@ impl Trainer {
             mixed_adversarial: adv_mixed,
             mixed_motion,
             mixed_contact,
+            mixed_sole,
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {

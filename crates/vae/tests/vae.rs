@@ -426,3 +426,54 @@ fn the_mixed_contact_term_is_reported_and_trained_down_only_when_on() {
         "contact term {first} -> {last} over 20 iterations"
     );
 }
+
+/// The leg of `footed_clip` standing still on its ankle (4 cm up) with the
+/// foot pitched by `pitch` rad (toe down for > 0), the hips swaying 2 cm.
+fn standing_clip(frames: usize, pitch: f64, phase: f64) -> Motion {
+    let walking = footed_clip(frames, 0.0, phase);
+    let mut root = Vec::new();
+    let mut rot = Vec::new();
+    for t in 0..frames {
+        let u = t as f64 / frames as f64;
+        let sway = 0.02 * (std::f64::consts::TAU * u + phase).sin();
+        root.push(DVec3::new(sway, 1.04, 0.0));
+        rot.extend([
+            DQuat::IDENTITY,
+            DQuat::IDENTITY,
+            DQuat::IDENTITY,
+            DQuat::from_rotation_x(pitch),
+        ]);
+    }
+    Motion::new(walking.skeleton().clone(), 30.0, root, rot).unwrap()
+}
+
+#[test]
+fn the_mixed_sole_term_is_reported_and_pulls_planted_feet_level() {
+    // Clips standing toe-down and clips standing heel-down: codes between
+    // two of them are asked to stand at the clips' mean pitch, level.
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| standing_clip(24, if i % 2 == 0 { 0.4 } else { -0.4 }, i as f64))
+        .collect();
+    let reported = |mixed_sole: f64| {
+        let mut cfg = tiny_config(150);
+        cfg.adversarial = false;
+        cfg.features.floor = None;
+        cfg.weights.mixed_sole = mixed_sole;
+        let mut out = vec![];
+        vae::train(&clips, &cfg, |p| out.push(p.losses.mixed_sole)).unwrap();
+        out
+    };
+    assert!(reported(0.0).iter().all(|&l| l == 0.0));
+    let tail = |v: &[f32]| v[v.len() - 20..].iter().sum::<f32>() / 20.0;
+    // Weighed next to nothing, the term only reports; weighed 10 it trains.
+    let watched = reported(1e-9);
+    let trained = reported(10.0);
+    assert!(watched.iter().all(|l| l.is_finite()), "{watched:?}");
+    assert!(tail(&watched) > 0.1, "{watched:?}");
+    assert!(
+        tail(&trained) < 0.5 * tail(&watched),
+        "sole term {} with weight 10, {} without",
+        tail(&trained),
+        tail(&watched)
+    );
+}

@@ -587,6 +587,11 @@ struct TableArgs {
     /// moving near samples otherwise hover (crates/vae/README.md, session 33).
     #[arg(long, default_value_t = TableConfig::default().vae_mixed_contact_weight)]
     vae_mixed_contact_weight: f64,
+    /// Weight of the VAE's sole term on mixed codes (0 = off): planted feet
+    /// of moving near samples otherwise stand on a heel or a toe
+    /// (crates/vae/README.md, session 34).
+    #[arg(long, default_value_t = TableConfig::default().vae_mixed_sole_weight)]
+    vae_mixed_sole_weight: f64,
     /// Weight of the VAE's skating term on mixed codes (default: the vae
     /// crate's 0.1).
     #[arg(long)]
@@ -650,6 +655,7 @@ impl TableArgs {
             vae_near_members: self.vae_near_members,
             vae_mixed_motion_weight: self.vae_mixed_motion_weight,
             vae_mixed_contact_weight: self.vae_mixed_contact_weight,
+            vae_mixed_sole_weight: self.vae_mixed_sole_weight,
             vae_skating_weight: self.vae_skating_weight,
             vae_smooth_s: self.vae_smooth_s,
             vae_plant_root: !self.vae_no_plant,
