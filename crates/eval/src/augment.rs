@@ -164,6 +164,8 @@ pub struct VaeTraining {
     pub mixed_contact_weight: f64,
     /// `vae::LossWeights::mixed_sole` (0: off, the vae crate's default).
     pub mixed_sole_weight: f64,
+    /// `vae::LossWeights::mixed_travel` (0: off, the vae crate's default).
+    pub mixed_travel_weight: f64,
     /// `vae::FootLoss::skating` (`None`: the vae crate's default).
     pub skating_weight: Option<f64>,
     /// Put the training clips on one floor (`vae::FloorLevel`, the vae
@@ -180,6 +182,7 @@ impl Default for VaeTraining {
             mixed_motion_weight: 0.0,
             mixed_contact_weight: 0.0,
             mixed_sole_weight: 0.0,
+            mixed_travel_weight: 0.0,
             skating_weight: None,
             level_floor: true,
         }
@@ -199,6 +202,9 @@ impl VaeTraining {
         }
         if self.mixed_sole_weight > 0.0 {
             name.push_str(&format!("-mixed-sole-{}", self.mixed_sole_weight));
+        }
+        if self.mixed_travel_weight > 0.0 {
+            name.push_str(&format!("-mixed-travel-{}", self.mixed_travel_weight));
         }
         if let Some(w) = self.skating_weight {
             name.push_str(&format!("-skating-{w}"));
@@ -222,6 +228,7 @@ impl VaeTraining {
         config.weights.mixed_motion = self.mixed_motion_weight;
         config.weights.mixed_contact = self.mixed_contact_weight;
         config.weights.mixed_sole = self.mixed_sole_weight;
+        config.weights.mixed_travel = self.mixed_travel_weight;
         if let Some(w) = self.skating_weight {
             config.feet.skating = w;
         }
@@ -247,7 +254,7 @@ pub fn train_vae(
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
     let config = training.config(seed);
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, skating weight {}, {}",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, mixed travel weight {}, skating weight {}, {}",
         clips.len(),
         config.iterations,
         config.adversarial,
@@ -255,6 +262,7 @@ pub fn train_vae(
         config.weights.mixed_motion,
         config.weights.mixed_contact,
         config.weights.mixed_sole,
+        config.weights.mixed_travel,
         config.feet.skating,
         if config.features.floor.is_some() {
             "clips on one floor"
@@ -343,13 +351,14 @@ mod tests {
             mixed_motion_weight: 1.0,
             mixed_contact_weight: 0.3,
             mixed_sole_weight: 0.5,
+            mixed_travel_weight: 2.0,
             skating_weight: Some(0.3),
             level_floor: false,
             ..plain
         };
         assert_eq!(
             all.folder_name("vae_noadv"),
-            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-mixed-sole-0.5-skating-0.3"
+            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-mixed-sole-0.5-mixed-travel-2-skating-0.3"
         );
     }
 

@@ -312,6 +312,39 @@ pub fn pose_speed(pos: &Tensor, root: &Tensor, mask: &Tensor, fps: f64) -> Resul
     Ok(((speed * &m)?.sum(1)? / n)?)
 }
 
+/// Per clip `(B, S)`, the mean horizontal root speed (m/s) in each of `S`
+/// equal parts of its valid steps (`lengths`: valid frames per clip): how
+/// the clip travels from its start to its end. A clip that stops halfway
+/// has ~0 in its last parts.
+pub fn travel_profile(root: &Tensor, lengths: &[usize], fps: f64, parts: usize) -> Result<Tensor> {
+    let (b, t, _) = root.dims3()?;
+    if t < 2 || parts == 0 {
+        return Ok(Tensor::zeros((b, parts), root.dtype(), root.device())?);
+    }
+    let v = velocities(root, fps)?;
+    let speed = ((v.narrow(2, 0, 1)?.sqr()? + v.narrow(2, 2, 1)?.sqr()?)? + 1e-8)?.sqrt()?;
+    // (B, T - 1, S): step i of a clip of n steps is in part floor(S i / n),
+    // weighted 1 / (the steps in that part), so each column averages a part.
+    let mut w = vec![0f32; b * (t - 1) * parts];
+    for (k, &len) in lengths.iter().enumerate().take(b) {
+        let steps = len.min(t).saturating_sub(1);
+        let part = |i: usize| parts * i / steps.max(1);
+        let mut count = vec![0usize; parts];
+        (0..steps).for_each(|i| count[part(i)] += 1);
+        for i in 0..steps {
+            let p = part(i);
+            w[(k * (t - 1) + i) * parts + p] = 1.0 / count[p] as f32;
+        }
+    }
+    let w = Tensor::from_vec(w, (b, t - 1, parts), root.device())?;
+    // (B, 1, T - 1) x (B, T - 1, S).
+    Ok(speed
+        .transpose(1, 2)?
+        .contiguous()?
+        .matmul(&w)?
+        .squeeze(1)?)
+}
+
 /// Mean over valid frames of the squared distance between foot points `(B, T, P, 3)`.
 pub fn position_error(pred: &Tensor, target: &Tensor, mask: &Tensor) -> Result<Tensor> {
     let d = (pred - target)?.sqr()?.sum(D::Minus1)?.mean(D::Minus1)?;
@@ -739,5 +772,32 @@ mod tests {
         // The same pitch in the air, or sliding at 1.2 m/s, is not standing.
         assert!(level(&clip(&[(0.37, 0.31, 0.0); 4])) < 1e-3);
         assert!(level(&clip(&[(0.07, 0.01, 0.01); 4])) < 1e-3);
+    }
+
+    #[test]
+    fn travel_profile_averages_the_root_speed_over_parts_of_each_clip() {
+        let dev = &Device::Cpu;
+        // Clip 0: 9 frames at 10 fps, 0.1 m per step in x for 4 steps, then
+        // still. Clip 1: 5 valid frames moving 0.2 m per step in z.
+        let mut v = Vec::new();
+        for i in 0..9 {
+            v.extend([0.1 * (i.min(4)) as f32, 1.0, 0.0]);
+        }
+        for i in 0..9 {
+            v.extend([0.0, 1.0, 0.2 * (i.min(4)) as f32]);
+        }
+        let root = Tensor::from_vec(v, (2, 9, 3), dev).unwrap();
+        let p = travel_profile(&root, &[9, 5], 10.0, 2)
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap();
+        assert!(
+            (p[0][0] - 1.0).abs() < 1e-3 && p[0][1].abs() < 1e-3,
+            "{p:?}"
+        );
+        assert!(
+            (p[1][0] - 2.0).abs() < 1e-3 && (p[1][1] - 2.0).abs() < 1e-3,
+            "{p:?}"
+        );
     }
 }

@@ -55,6 +55,15 @@ pub struct LossWeights {
     /// 33). 0: off.
     #[serde(default)]
     pub mixed_sole: f64,
+    /// On the squared relative difference between a mixed-code decode's
+    /// root travel profile (`feet::travel_profile`: mean horizontal root
+    /// speed in each quarter of the clip) and the mean of its two parents'.
+    /// With the contact and skating terms, decoded jog samples met "feet on
+    /// the ground" by stopping: half of them travelled < 10 % of their path
+    /// in their last quarter (captures 30 %; crates/vae/README.md, session
+    /// 34), and the simulated jogger fell stopping. 0: off.
+    #[serde(default)]
+    pub mixed_travel: f64,
 }
 
 impl Default for LossWeights {
@@ -67,6 +76,7 @@ impl Default for LossWeights {
             mixed_motion: 0.0,
             mixed_contact: 0.0,
             mixed_sole: 0.0,
+            mixed_travel: 0.0,
         }
     }
 }
@@ -83,6 +93,7 @@ impl LossWeights {
                 ("mixed_motion", self.mixed_motion),
                 ("mixed_contact", self.mixed_contact),
                 ("mixed_sole", self.mixed_sole),
+                ("mixed_travel", self.mixed_travel),
             ],
         )
     }

@@ -161,6 +161,10 @@ pub struct Losses {
     /// in units of the 2 cm sole tolerance (0 when off).
     #[serde(default)]
     pub mixed_sole: f32,
+    /// Squared relative root travel profile difference of mixed-code decodes
+    /// and their parents (0 when off).
+    #[serde(default)]
+    pub mixed_travel: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -205,7 +209,13 @@ struct Prepared {
     /// Mean ankle-to-toe drop of the batch's planted feet `(F,)` (when the
     /// mixed-sole term is on): how the skeleton stands on its soles.
     stance_drop: Option<Tensor>,
+    /// Each clip's root travel profile `(B, TRAVEL_PARTS)` (when the
+    /// mixed-travel term is on): what its mixed decodes are asked to match.
+    travel: Option<Tensor>,
 }
+
+/// Parts of a clip the travel profile averages the root speed over.
+const TRAVEL_PARTS: usize = 4;
 
 /// The correction's sole tolerance (`correct::AcceptanceConfig::sole_tolerance_m`),
 /// the unit of the mixed-sole term.
@@ -242,6 +252,16 @@ impl Prepared {
             )?),
             _ => None,
         };
+        let travel = if config.weights.mixed_travel > 0.0 {
+            Some(feet::travel_profile(
+                &batch.raw.narrow(2, 0, 3)?,
+                &batch.lengths,
+                config.features.fps,
+                TRAVEL_PARTS,
+            )?)
+        } else {
+            None
+        };
         Ok(Prepared {
             batch,
             rotations,
@@ -249,6 +269,7 @@ impl Prepared {
             pose_speed,
             ground_contact,
             stance_drop,
+            travel,
         })
     }
 }
@@ -266,6 +287,8 @@ struct Mixed {
     mask: Tensor,
     /// Batch indices `(B,)` of the two parent clips (`u32`).
     parents: (Tensor, Tensor),
+    /// Valid frames of each (what `mask` marks).
+    lengths: Vec<usize>,
 }
 
 impl Mixed {
@@ -346,6 +369,7 @@ impl Trainer {
                 pose_speed: p.pose_speed.clone(),
                 ground_contact: p.ground_contact.clone(),
                 stance_drop: p.stance_drop.clone(),
+                travel: p.travel.clone(),
             });
         }
         let bs = self.config.batch_size;
@@ -381,11 +405,13 @@ impl Trainer {
         let i = pick(&mut self.rng);
         let j = pick(&mut self.rng);
         let mut mask = vec![0.0f32; b * frames];
+        let mut valid = Vec::with_capacity(b);
         for (k, (&a, &c)) in i.iter().zip(&j).enumerate() {
             let n = (lengths[a as usize] + lengths[c as usize])
                 .div_ceil(2)
                 .min(frames);
             mask[k * frames..k * frames + n].fill(1.0);
+            valid.push(n);
         }
         let dev = mu.device();
         let ii = Tensor::from_vec(i, b, dev)?;
@@ -400,6 +426,7 @@ impl Trainer {
             codes: z,
             mask: Tensor::from_vec(mask, (b, frames), dev)?,
             parents: (ii, jj),
+            lengths: valid,
         })
     }
 
@@ -435,6 +462,7 @@ impl Trainer {
         let mixed = if (self.feet.is_some()
             && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0 || w.mixed_sole > 0.0))
             || w.mixed_motion > 0.0
+            || w.mixed_travel > 0.0
             || mixed_adversarial
         {
             Some(self.mixed_codes(&mu, &logvar, &batch.lengths, frames)?)
@@ -469,6 +497,19 @@ impl Trainer {
             let term = rel.sqr()?.mean_all()?;
             mixed_motion = term.to_scalar::<f32>()?;
             total = (total + (term * w.mixed_motion)?)?;
+        }
+        let mut mixed_travel = 0.0;
+        if let (Some(m), Some(real)) = (&mixed, &prepared.travel) {
+            let root = raw_all.narrow(0, b, b)?.narrow(2, 0, 3)?;
+            let made =
+                feet::travel_profile(&root, &m.lengths, self.config.features.fps, TRAVEL_PARTS)?;
+            let target = m.parents_mean(real)?;
+            // Relative to the parents' speed, at least 0.1 m/s (a parent
+            // standing still asks for ~0 without dividing by it).
+            let rel = ((made - &target)? / target.clamp(0.1, f64::INFINITY)?)?;
+            let term = rel.sqr()?.mean_all()?;
+            mixed_travel = term.to_scalar::<f32>()?;
+            total = (total + (term * w.mixed_travel)?)?;
         }
         let mut foot = [0.0f32; 4];
         let mut mixed_contact = 0.0;
@@ -590,6 +631,7 @@ impl Trainer {
             mixed_motion,
             mixed_contact,
             mixed_sole,
+            mixed_travel,
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {

@@ -477,3 +477,40 @@ fn the_mixed_sole_term_is_reported_and_pulls_planted_feet_level() {
         tail(&watched)
     );
 }
+
+#[test]
+fn the_mixed_travel_term_is_reported_and_trains_the_root_path() {
+    // Walks at two speeds: codes between two of them are asked to travel,
+    // quarter by quarter, at the mean of their parents' speeds.
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| {
+            let mut walk = footed_clip(24, 0.0, i as f64);
+            let fast = if i % 2 == 0 { 1.0 } else { 3.0 };
+            for p in walk.root_translation_mut() {
+                p.z *= fast;
+            }
+            walk
+        })
+        .collect();
+    let reported = |mixed_travel: f64| {
+        let mut cfg = tiny_config(150);
+        cfg.adversarial = false;
+        cfg.features.floor = None;
+        cfg.weights.mixed_travel = mixed_travel;
+        let mut out = vec![];
+        vae::train(&clips, &cfg, |p| out.push(p.losses.mixed_travel)).unwrap();
+        out
+    };
+    assert!(reported(0.0).iter().all(|&l| l == 0.0));
+    let tail = |v: &[f32]| v[v.len() - 20..].iter().sum::<f32>() / 20.0;
+    let watched = reported(1e-9);
+    let trained = reported(10.0);
+    assert!(watched.iter().all(|l| l.is_finite()), "{watched:?}");
+    assert!(tail(&watched) > 0.01, "{watched:?}");
+    assert!(
+        tail(&trained) < 0.5 * tail(&watched),
+        "travel term {} with weight 10, {} without",
+        tail(&trained),
+        tail(&watched)
+    );
+}

@@ -592,6 +592,11 @@ struct TableArgs {
     /// (crates/vae/README.md, session 34).
     #[arg(long, default_value_t = TableConfig::default().vae_mixed_sole_weight)]
     vae_mixed_sole_weight: f64,
+    /// Weight of the VAE's travel term on mixed codes (0 = off): with the
+    /// contact and skating terms, moving near samples otherwise stop
+    /// halfway (crates/vae/README.md, session 34).
+    #[arg(long, default_value_t = TableConfig::default().vae_mixed_travel_weight)]
+    vae_mixed_travel_weight: f64,
     /// Weight of the VAE's skating term on mixed codes (default: the vae
     /// crate's 0.1).
     #[arg(long)]
@@ -656,6 +661,7 @@ impl TableArgs {
             vae_mixed_motion_weight: self.vae_mixed_motion_weight,
             vae_mixed_contact_weight: self.vae_mixed_contact_weight,
             vae_mixed_sole_weight: self.vae_mixed_sole_weight,
+            vae_mixed_travel_weight: self.vae_mixed_travel_weight,
             vae_skating_weight: self.vae_skating_weight,
             vae_smooth_s: self.vae_smooth_s,
             vae_plant_root: !self.vae_no_plant,

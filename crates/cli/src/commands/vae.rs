@@ -126,6 +126,10 @@ struct TrainArgs {
     /// to the training clips' stance drop (needs the foot terms).
     #[arg(long)]
     mixed_sole_weight: Option<f64>,
+    /// Weight of the term asking mixed-code decodes to travel like the two
+    /// clips they were drawn between (root speed in each quarter of the clip).
+    #[arg(long)]
+    mixed_travel_weight: Option<f64>,
     /// Weight of the foot terms' skating of mixed-code decodes (planted feet
     /// that slide; `vae::FootLoss::skating`).
     #[arg(long)]
@@ -241,6 +245,9 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(w) = args.mixed_sole_weight {
         config.weights.mixed_sole = w;
     }
+    if let Some(w) = args.mixed_travel_weight {
+        config.weights.mixed_travel = w;
+    }
     if let Some(w) = args.skating_weight {
         config.feet.skating = w;
     }
@@ -267,10 +274,10 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
             let l = p.losses;
             eprintln!(
-                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3} contact {:.4} sole {:.4}",
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3} contact {:.4} sole {:.4} travel {:.4}",
                 p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
                 l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor,
-                l.mixed_adversarial, l.mixed_motion, l.mixed_contact, l.mixed_sole
+                l.mixed_adversarial, l.mixed_motion, l.mixed_contact, l.mixed_sole, l.mixed_travel
             );
         }
     })

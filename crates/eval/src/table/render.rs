@@ -58,6 +58,12 @@ impl TableConfig {
                     json!(c.vae_mixed_sole_weight),
                 );
             }
+            if c.vae_mixed_travel_weight > 0.0 {
+                map.insert(
+                    "vae_mixed_travel_weight".into(),
+                    json!(c.vae_mixed_travel_weight),
+                );
+            }
             if let Some(w) = c.vae_skating_weight {
                 map.insert("vae_skating_weight".into(), json!(w));
             }
@@ -1052,18 +1058,21 @@ mod tests {
     }
 
     #[test]
-    fn the_vae_contact_sole_and_skating_weights_are_recorded_only_when_set() {
+    fn the_vae_contact_sole_travel_and_skating_weights_are_recorded_only_when_set() {
         let mut t = table();
         let off = t.config.cell_key();
         assert!(off.get("vae_mixed_contact_weight").is_none(), "{off}");
         assert!(off.get("vae_mixed_sole_weight").is_none(), "{off}");
+        assert!(off.get("vae_mixed_travel_weight").is_none(), "{off}");
         assert!(off.get("vae_skating_weight").is_none(), "{off}");
         t.config.vae_mixed_contact_weight = 1.0;
         t.config.vae_mixed_sole_weight = 0.3;
+        t.config.vae_mixed_travel_weight = 2.0;
         t.config.vae_skating_weight = Some(0.5);
         let on = t.config.cell_key();
         assert_eq!(on["vae_mixed_contact_weight"], 1.0);
         assert_eq!(on["vae_mixed_sole_weight"], 0.3);
+        assert_eq!(on["vae_mixed_travel_weight"], 2.0);
         assert_eq!(on["vae_skating_weight"], 0.5);
         assert_ne!(on, off);
         t.config.vae_mixed_sole_weight = f64::NAN;
