@@ -45,7 +45,8 @@ enum Command {
     /// Motion prediction error with and without an augmentation (leave one actor out).
     Predict(PredictArgs),
     /// The whole evaluation table for several classes: JSON + Markdown.
-    Table(TableArgs),
+    /// (Boxed: its options outgrow the other commands'.)
+    Table(Box<TableArgs>),
     /// Tables of separate `eval table` runs (e.g. one per test actor) merged
     /// into one, aggregated over all their folds and seeds.
     Merge(MergeArgs),
@@ -772,7 +773,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::Synth(a) => run_synth(a),
         Command::Predict(a) => run_predict(a),
-        Command::Table(a) => run_table(a),
+        Command::Table(a) => run_table(*a),
         Command::Merge(a) => run_merge(a),
         Command::Cmu(a) => run_cmu(a),
     }
