@@ -169,6 +169,10 @@ impl CorrectConfig {
         if !(w.is_finite() && (0.0..=0.9).contains(&w)) {
             return bad(format!("sole reward weight {w} is not in [0, 0.9]"));
         }
+        let p = self.physics.fall_penalty;
+        if !(p.is_finite() && p >= 0.0) {
+            return bad(format!("fall penalty {p} is not a number >= 0"));
+        }
         self.residual_schedule.validate()?;
         if let Some(s) = self.tracker_final_residual_scale
             && !(s.is_finite() && s > 0.0 && s <= 1.0)

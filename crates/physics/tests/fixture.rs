@@ -494,3 +494,32 @@ fn the_reference_follows_translation_tracks() {
     );
     assert!((shin(&b, 0) - shin(&a, 0)).abs() < 1e-6);
 }
+
+/// Without the root force and with every joint bent far off its target the
+/// character collapses; the step that ends in the fall pays the fall
+/// penalty in the training reward and nothing in the paper's.
+#[test]
+fn a_fall_pays_the_fall_penalty_in_the_training_reward_only() {
+    let motion = sway(cmu_humanoid(), 3.0, 120.0);
+    let fall = |penalty: f32| {
+        let config = Config {
+            residual: physics::Residual::None,
+            fall_penalty: penalty,
+            ..Config::default()
+        };
+        let mut env = ImitationEnv::new(&motion, &config).unwrap();
+        let action = vec![1.5; env.act_dim()];
+        loop {
+            let r = env.step(&action).unwrap();
+            if r.done {
+                return r;
+            }
+        }
+    };
+    for penalty in [0.0, 5.0] {
+        let r = fall(penalty);
+        assert!(r.terminated && r.info.fell, "{r:?}");
+        assert_eq!(r.reward, -penalty);
+        assert_eq!(r.info.paper_reward, 0.0);
+    }
+}

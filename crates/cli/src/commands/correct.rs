@@ -52,6 +52,10 @@ pub struct Args {
     /// and toe on it; 0 = MotionAug's reward).
     #[arg(long, default_value_t = CorrectConfig::default().physics.sole_reward_weight)]
     sole_reward_weight: f32,
+    /// Training reward of a step that ends in a fall, negated (0 = the
+    /// paper's 0; acceptance reads the paper's reward either way).
+    #[arg(long, default_value_t = CorrectConfig::default().physics.fall_penalty)]
+    fall_penalty: f32,
     /// Speed scale of the sole reward's sliding term, m/s (0 = off).
     #[arg(long, default_value_t = CorrectConfig::default().physics.skate_scale_m_s)]
     skate_scale: f32,
@@ -119,6 +123,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.tracker_final_residual_scale = args.tracker_final_residual_scale;
     config.physics.residual = args.residual;
     config.physics.sole_reward_weight = args.sole_reward_weight;
+    config.physics.fall_penalty = args.fall_penalty;
     config.physics.skate_scale_m_s = args.skate_scale;
     config.skate_scale_when_skating_m_s = args.skate_scale_when_skating;
     config.warm_start = args.warm_start.clone();
