@@ -23,8 +23,9 @@
 //!   `r_res = exp(-0.01 |[F; tau]|)` (1 without residual force). Both are 0 on
 //!   the step that ends in a fall (the training reward `-fall_penalty`).
 //!   With `sole_reward_weight` w > 0 (0.2 by default) the training reward
-//!   is `(0.9 - w) r_imit + 0.1 r_res + w r_sole`, `r_sole` rewarding touching feet for heel and toe on the floor; the
-//!   paper's reward stays in [`StepInfo::paper_reward`] for acceptance.
+//!   is `(0.9 - w) r_imit + 0.1 r_res + w r_sole`, `r_sole` rewarding
+//!   touching feet for heel and toe on the floor; the paper's reward stays
+//!   in [`StepInfo::paper_reward`] for acceptance.
 //! * **Termination**: a non-foot body touches the ground while the same body
 //!   of the reference is not within `contact_tolerance` of the floor (a fall),
 //!   or the clip ends.
