@@ -447,6 +447,39 @@ fn standing_clip(frames: usize, pitch: f64, phase: f64) -> Motion {
     Motion::new(walking.skeleton().clone(), 30.0, root, rot).unwrap()
 }
 
+/// Trains `clips` with a mixed-code term off, weighed next to nothing (it
+/// only reports) and weighed 10, and checks that it reports 0 when off, a
+/// finite value above `floor` when watched, and that training on it halves
+/// its last 20 values. `set` sets the term's weight, `read` reads its loss.
+fn check_mixed_term_trains(
+    clips: &[Motion],
+    floor: f32,
+    set: impl Fn(&mut TrainConfig, f64),
+    read: impl Fn(&vae::Losses) -> f32,
+) {
+    let reported = |weight: f64| {
+        let mut cfg = tiny_config(150);
+        cfg.adversarial = false;
+        cfg.features.floor = None;
+        set(&mut cfg, weight);
+        let mut out = vec![];
+        vae::train(clips, &cfg, |p| out.push(read(p.losses))).unwrap();
+        out
+    };
+    assert!(reported(0.0).iter().all(|&l| l == 0.0));
+    let tail = |v: &[f32]| v[v.len() - 20..].iter().sum::<f32>() / 20.0;
+    let watched = reported(1e-9);
+    let trained = reported(10.0);
+    assert!(watched.iter().all(|l| l.is_finite()), "{watched:?}");
+    assert!(tail(&watched) > floor, "{watched:?}");
+    assert!(
+        tail(&trained) < 0.5 * tail(&watched),
+        "term {} with weight 10, {} without",
+        tail(&trained),
+        tail(&watched)
+    );
+}
+
 #[test]
 fn the_mixed_sole_term_is_reported_and_pulls_planted_feet_level() {
     // Clips standing toe-down and clips standing heel-down: codes between
@@ -454,27 +487,11 @@ fn the_mixed_sole_term_is_reported_and_pulls_planted_feet_level() {
     let clips: Vec<Motion> = (0..6)
         .map(|i| standing_clip(24, if i % 2 == 0 { 0.4 } else { -0.4 }, i as f64))
         .collect();
-    let reported = |mixed_sole: f64| {
-        let mut cfg = tiny_config(150);
-        cfg.adversarial = false;
-        cfg.features.floor = None;
-        cfg.weights.mixed_sole = mixed_sole;
-        let mut out = vec![];
-        vae::train(&clips, &cfg, |p| out.push(p.losses.mixed_sole)).unwrap();
-        out
-    };
-    assert!(reported(0.0).iter().all(|&l| l == 0.0));
-    let tail = |v: &[f32]| v[v.len() - 20..].iter().sum::<f32>() / 20.0;
-    // Weighed next to nothing, the term only reports; weighed 10 it trains.
-    let watched = reported(1e-9);
-    let trained = reported(10.0);
-    assert!(watched.iter().all(|l| l.is_finite()), "{watched:?}");
-    assert!(tail(&watched) > 0.1, "{watched:?}");
-    assert!(
-        tail(&trained) < 0.5 * tail(&watched),
-        "sole term {} with weight 10, {} without",
-        tail(&trained),
-        tail(&watched)
+    check_mixed_term_trains(
+        &clips,
+        0.1,
+        |c, w| c.weights.mixed_sole = w,
+        |l| l.mixed_sole,
     );
 }
 
@@ -492,25 +509,10 @@ fn the_mixed_travel_term_is_reported_and_trains_the_root_path() {
             walk
         })
         .collect();
-    let reported = |mixed_travel: f64| {
-        let mut cfg = tiny_config(150);
-        cfg.adversarial = false;
-        cfg.features.floor = None;
-        cfg.weights.mixed_travel = mixed_travel;
-        let mut out = vec![];
-        vae::train(&clips, &cfg, |p| out.push(p.losses.mixed_travel)).unwrap();
-        out
-    };
-    assert!(reported(0.0).iter().all(|&l| l == 0.0));
-    let tail = |v: &[f32]| v[v.len() - 20..].iter().sum::<f32>() / 20.0;
-    let watched = reported(1e-9);
-    let trained = reported(10.0);
-    assert!(watched.iter().all(|l| l.is_finite()), "{watched:?}");
-    assert!(tail(&watched) > 0.01, "{watched:?}");
-    assert!(
-        tail(&trained) < 0.5 * tail(&watched),
-        "travel term {} with weight 10, {} without",
-        tail(&trained),
-        tail(&watched)
+    check_mixed_term_trains(
+        &clips,
+        0.01,
+        |c, w| c.weights.mixed_travel = w,
+        |l| l.mixed_travel,
     );
 }
