@@ -22,6 +22,7 @@ pub struct Dataset {
 }
 
 /// A padded batch: `x` normalised `(B, T, F)`, `raw` `(B, T, F)`, `mask` `(B, T)`.
+#[derive(Clone)]
 pub struct Batch {
     pub x: Tensor,
     pub raw: Tensor,

@@ -375,6 +375,21 @@ pub fn velocity_error(pred: &Tensor, target: &Tensor, mask: &Tensor, fps: f64) -
     masked_frame_mean(&d, &step_mask(mask)?)
 }
 
+/// How far below `height_m` heights are, as a logistic step 1 cm wide: ~1
+/// well below, ~0 well above. What every foot term calls touching.
+fn below(heights: &Tensor, height_m: f64) -> Result<Tensor> {
+    Ok(candle_nn::ops::sigmoid(&((height_m - heights)? * 100.0)?)?)
+}
+
+/// The higher of each pair of consecutive frames `(B, T - 1, ...)` of heights
+/// `(B, T, ...)`: a point touches over a step only if it does in both frames.
+fn step_high(heights: &Tensor) -> Result<Tensor> {
+    let t = heights.dim(1)?;
+    Ok(heights
+        .narrow(1, 1, t - 1)?
+        .maximum(&heights.narrow(1, 0, t - 1)?)?)
+}
+
 /// Contact-weighted mean squared horizontal speed ((m/s)^2) of foot points
 /// `(B, T, P, 3)`: each step weighs `sigmoid((h - y) / 1 cm)` with `y` the
 /// point's higher height over the step, taken as a constant (the term slows a
@@ -387,8 +402,7 @@ pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> 
     let v = velocities(pos, fps)?;
     let horizontal = (v.narrow(3, 0, 1)?.sqr()? + v.narrow(3, 2, 1)?.sqr()?)?.squeeze(3)?;
     let y = pos.narrow(3, 1, 1)?.squeeze(3)?.detach();
-    let high = y.narrow(1, 1, t - 1)?.maximum(&y.narrow(1, 0, t - 1)?)?;
-    let weight = candle_nn::ops::sigmoid(&((contact_height_m - high)? * 100.0)?)?;
+    let weight = below(&step_high(&y)?, contact_height_m)?;
     let per_step = (weight * horizontal)?.mean(D::Minus1)?;
     masked_frame_mean(&per_step, &step_mask(mask)?)
 }
@@ -398,7 +412,7 @@ pub fn skating(pos: &Tensor, mask: &Tensor, fps: f64, contact_height_m: f64) -> 
 /// how much of the clip stands on the ground rather than hovering.
 pub fn ground_contact(pos: &Tensor, mask: &Tensor, height_m: f64) -> Result<Tensor> {
     let lowest = pos.narrow(3, 1, 1)?.squeeze(3)?.min(D::Minus1)?;
-    let touching = candle_nn::ops::sigmoid(&((height_m - lowest)? * 100.0)?)?;
+    let touching = below(&lowest, height_m)?;
     let n = mask.sum(1)?.clamp(1.0, f64::INFINITY)?;
     Ok(((touching * mask)?.sum(1)? / n)?)
 }
@@ -408,10 +422,11 @@ pub fn ground_contact(pos: &Tensor, mask: &Tensor, height_m: f64) -> Result<Tens
 /// frames (a logistic step 1 cm wide) and its fastest point slower than
 /// `PLANTED_SPEED_M_S` (a logistic step 5 cm/s wide); the correction's
 /// criterion calls a foot planted when it touches and heel and toe are
-/// slower than 0.2 m/s. And the drop from ankle to toe `(B, T - 1, F)` at
-/// frame `t + 1`, m.
+/// slower than 0.2 m/s; 0 on steps the mask leaves out. And the drop from
+/// ankle to toe `(B, T - 1, F)` at frame `t + 1`, m.
 fn planted_drop(
     pos: &Tensor,
+    mask: &Tensor,
     soles: &[Sole],
     fps: f64,
     contact_height_m: f64,
@@ -419,24 +434,23 @@ fn planted_drop(
     let t = pos.dim(1)?;
     let dev = pos.device();
     let y = pos.narrow(3, 1, 1)?.squeeze(3)?.contiguous()?;
+    let y_const = y.detach();
     let speed = (velocities(&pos.detach(), fps)?.sqr()?.sum(D::Minus1)? + 1e-12)?
         .sqrt()?
         .contiguous()?;
     let (mut weight, mut drop) = (Vec::new(), Vec::new());
     for s in soles {
         let idx = Tensor::new(s.points.as_slice(), dev)?;
-        let low = y.detach().index_select(&idx, 2)?.min(D::Minus1)?;
-        let high = low
-            .narrow(1, 1, t - 1)?
-            .maximum(&low.narrow(1, 0, t - 1)?)?;
-        let touching = candle_nn::ops::sigmoid(&((contact_height_m - high)? * 100.0)?)?;
+        let low = y_const.index_select(&idx, 2)?.min(D::Minus1)?;
+        let touching = below(&step_high(&low)?, contact_height_m)?;
         let fastest = speed.index_select(&idx, 2)?.max(D::Minus1)?;
         let slow = candle_nn::ops::sigmoid(&((PLANTED_SPEED_M_S - fastest)? * 20.0)?)?;
         weight.push((touching * slow)?);
         let d = (y.narrow(2, s.ankle, 1)? - y.narrow(2, s.toe, 1)?)?.squeeze(2)?;
         drop.push(d.narrow(1, 1, t - 1)?);
     }
-    Ok((Tensor::stack(&weight, 2)?, Tensor::stack(&drop, 2)?))
+    let weight = Tensor::stack(&weight, 2)?.broadcast_mul(&step_mask(mask)?.unsqueeze(2)?)?;
+    Ok((weight, Tensor::stack(&drop, 2)?))
 }
 
 /// A foot faster than this (its fastest point, 3D) is not planted, m/s.
@@ -456,8 +470,7 @@ pub fn stance_drop(
     if pos.dim(1)? < 2 || soles.is_empty() {
         return Ok(Tensor::zeros(soles.len(), pos.dtype(), pos.device())?);
     }
-    let (w, d) = planted_drop(pos, soles, fps, contact_height_m)?;
-    let w = w.broadcast_mul(&step_mask(mask)?.unsqueeze(2)?)?;
+    let (w, d) = planted_drop(pos, mask, soles, fps, contact_height_m)?;
     let total = w.sum((0, 1))?;
     Ok(((w * d)?.sum((0, 1))? / total.clamp(1e-6, f64::INFINITY)?)?)
 }
@@ -478,8 +491,7 @@ pub fn sole_level(
     if pos.dim(1)? < 2 || soles.is_empty() {
         return Ok(Tensor::zeros((), pos.dtype(), pos.device())?);
     }
-    let (w, d) = planted_drop(pos, soles, fps, contact_height_m)?;
-    let w = w.broadcast_mul(&step_mask(mask)?.unsqueeze(2)?)?;
+    let (w, d) = planted_drop(pos, mask, soles, fps, contact_height_m)?;
     let e = (d.broadcast_sub(stance)? / tolerance_m)?.sqr()?;
     // A thousandth of a planted step: no planted step gives ~0, not 0 / 0.
     let total = w.sum_all()?.clamp(1e-3, f64::INFINITY)?;

@@ -196,6 +196,7 @@ pub struct Trainer {
 }
 
 /// A batch with what the loss compares it to: rotation matrices and foot positions.
+#[derive(Clone)]
 struct Prepared {
     batch: Batch,
     rotations: Tensor,
@@ -299,6 +300,15 @@ impl Mixed {
             + per_clip.index_select(&self.parents.1, 0)?)?
             * 0.5)?)
     }
+
+    /// Mean squared difference between what the decodes made and their
+    /// parents' mean of `per_clip`, relative to that mean (floored at
+    /// `floor`, so that parents near 0 do not divide by it).
+    fn relative_error(&self, made: &Tensor, per_clip: &Tensor, floor: f64) -> Result<Tensor> {
+        let target = self.parents_mean(per_clip)?;
+        let rel = ((made - &target)? / target.clamp(floor, f64::INFINITY)?)?;
+        Ok(rel.sqr()?.mean_all()?)
+    }
 }
 
 impl Trainer {
@@ -356,21 +366,8 @@ impl Trainer {
 
     fn next_batch(&mut self) -> Result<Prepared> {
         if let Some(p) = &self.full_batch {
-            let b = &p.batch;
-            return Ok(Prepared {
-                batch: Batch {
-                    x: b.x.clone(),
-                    raw: b.raw.clone(),
-                    mask: b.mask.clone(),
-                    lengths: b.lengths.clone(),
-                },
-                rotations: p.rotations.clone(),
-                feet: p.feet.clone(),
-                pose_speed: p.pose_speed.clone(),
-                ground_contact: p.ground_contact.clone(),
-                stance_drop: p.stance_drop.clone(),
-                travel: p.travel.clone(),
-            });
+            // Tensors are reference-counted: the clone shares their storage.
+            return Ok(p.clone());
         }
         let bs = self.config.batch_size;
         if self.cursor.saturating_add(bs) > self.order.len() {
@@ -492,9 +489,7 @@ impl Trainer {
         if let (Some(m), Some(jk), Some(real)) = (&mixed, &self.joints, &prepared.pose_speed) {
             let raw_mixed = raw_all.narrow(0, b, b)?;
             let moving = pose_speed(jk, &raw_mixed, &m.mask, self.config.features.fps)?;
-            let target = m.parents_mean(real)?;
-            let rel = ((moving - &target)? / target.clamp(1e-3, f64::INFINITY)?)?;
-            let term = rel.sqr()?.mean_all()?;
+            let term = m.relative_error(&moving, real, 1e-3)?;
             mixed_motion = term.to_scalar::<f32>()?;
             total = (total + (term * w.mixed_motion)?)?;
         }
@@ -503,11 +498,8 @@ impl Trainer {
             let root = raw_all.narrow(0, b, b)?.narrow(2, 0, 3)?;
             let made =
                 feet::travel_profile(&root, &m.lengths, self.config.features.fps, TRAVEL_PARTS)?;
-            let target = m.parents_mean(real)?;
-            // Relative to the parents' speed, at least 0.1 m/s (a parent
-            // standing still asks for ~0 without dividing by it).
-            let rel = ((made - &target)? / target.clamp(0.1, f64::INFINITY)?)?;
-            let term = rel.sqr()?.mean_all()?;
+            // Relative to the parents' speed, at least 0.1 m/s.
+            let term = m.relative_error(&made, real, 0.1)?;
             mixed_travel = term.to_scalar::<f32>()?;
             total = (total + (term * w.mixed_travel)?)?;
         }
