@@ -232,6 +232,75 @@ pub fn input_soles(
     ))
 }
 
+/// How far a clip's zero moment point leaves its support polygon
+/// ([`physics::balance`]), over the frames a foot supports: what the clip
+/// would need from something other than its feet. Not a criterion: it judges
+/// the input before a correction (`motionaug metrics --balance`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct BalanceStats {
+    /// Interior frames with a foot on the floor (and not in free fall).
+    pub supported_frames: usize,
+    /// Supported frames whose ZMP lies more than `margin_m` outside.
+    pub unbalanced_frames: usize,
+    pub margin_m: f64,
+    /// Sum and largest distance outside over the supported frames, m.
+    pub outside_sum_m: f64,
+    pub outside_max_m: f64,
+}
+
+/// The margin [`input_balance`] allows the ZMP outside the support polygon:
+/// the cart-table model leaves out the angular momentum of swinging arms and
+/// legs, and a 30 Hz second difference of captured positions is noisy.
+pub const BALANCE_MARGIN_M: f64 = 0.05;
+
+impl BalanceStats {
+    pub fn of(stances: &[physics::balance::Stance], margin_m: f64) -> BalanceStats {
+        let mut s = BalanceStats {
+            margin_m,
+            ..BalanceStats::default()
+        };
+        for st in stances {
+            if let physics::balance::Stance::Supported { outside_m } = *st {
+                let d = outside_m as f64;
+                s.supported_frames += 1;
+                s.outside_sum_m += d;
+                s.outside_max_m = s.outside_max_m.max(d);
+                s.unbalanced_frames += usize::from(d > margin_m);
+            }
+        }
+        s
+    }
+
+    /// Unbalanced frames / supported frames (0 with none supported).
+    pub fn unbalanced_fraction(&self) -> f64 {
+        self.unbalanced_frames as f64 / self.supported_frames.max(1) as f64
+    }
+
+    /// Mean distance of the ZMP outside the support polygon, m.
+    pub fn mean_outside_m(&self) -> f64 {
+        self.outside_sum_m / self.supported_frames.max(1) as f64
+    }
+}
+
+/// The balance of the *input* at the control rate, with the simulated
+/// character's masses and (calibrated) foot boxes, a foot supporting when
+/// its sole is within the soles criterion's tolerance of the floor.
+pub fn input_balance(
+    motion: &motion::Motion,
+    physics: &physics::Config,
+    config: &AcceptanceConfig,
+) -> Result<BalanceStats, CorrectError> {
+    let physics = physics::Config {
+        plant_reference: false,
+        ..physics.clone()
+    };
+    let env = physics::ImitationEnv::new(motion, &physics)?;
+    Ok(BalanceStats::of(
+        &env.reference_balance(config.sole_tolerance_m as f32),
+        BALANCE_MARGIN_M,
+    ))
+}
+
 /// Every criterion, judged on a rollout and the plausibility of the input and
 /// the output.
 pub fn judge(
@@ -259,7 +328,14 @@ pub fn judge(
             false,
             match rollout.fell_at {
                 None => "the character reached the end of the clip".into(),
-                Some(t) => format!("the character fell at control step {t}"),
+                Some(t) => format!(
+                    "the character fell at control step {t} of {}{}",
+                    rollout.clip_steps,
+                    match &rollout.fell_body {
+                        Some(b) => format!(" ({b} touched the ground)"),
+                        None => String::new(),
+                    }
+                ),
             },
         ),
         Criterion::new(

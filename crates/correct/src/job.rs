@@ -523,6 +523,8 @@ fn report(
         criteria,
         accept_threshold: config.acceptance.min_mean_reward,
         fell_at: rollout.fell_at,
+        fell_body: rollout.fell_body.clone(),
+        clip_steps: rollout.clip_steps,
         r_norm_action0: action0.r_norm(),
         stop_reason: finish.stop_reason.to_string(),
         residual: residual_name(config.physics.residual).to_string(),

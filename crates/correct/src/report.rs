@@ -37,8 +37,16 @@ pub struct Report {
     pub rejected_because: Vec<String>,
     /// The mean-reward limit (paper: 0.7); the others are in `criteria`.
     pub accept_threshold: f64,
-    /// Control step at which the character fell in the final rollout, if it did.
+    /// Control step at which the character fell in the final rollout, if it
+    /// did (of `clip_steps`; `frames` counts the frames simulated, so a clip
+    /// that fell is shorter than its input).
     pub fell_at: Option<usize>,
+    /// The body that touched the ground when it fell.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fell_body: Option<String>,
+    /// Control steps of the whole clip (reports written before it read 0).
+    #[serde(default)]
+    pub clip_steps: usize,
     /// R_norm of the untrained tracker (action 0) for comparison.
     pub r_norm_action0: f64,
     /// Why training stopped: target, time_budget, max_iterations, max_samples.
@@ -51,6 +59,7 @@ pub struct Report {
     pub residual_scale: f64,
     /// Frame rate of the corrected clip (the control rate).
     pub fps: f64,
+    /// Frames of the corrected clip: the frames simulated, up to the fall.
     pub frames: usize,
     /// Checkpoint the policy was warm-started from, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]

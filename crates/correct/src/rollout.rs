@@ -28,6 +28,9 @@ pub struct Rollout {
     pub residual_force: Vec<f32>,
     /// Step at which the character fell, if it did.
     pub fell_at: Option<usize>,
+    /// The body that touched the ground when it fell (the character's body
+    /// name, e.g. `head`).
+    pub fell_body: Option<String>,
     /// How each simulated foot met the floor after each step.
     pub feet: Vec<Vec<physics::FootContact>>,
     pub total_mass_kg: f64,
@@ -69,6 +72,7 @@ where
     let mut r_imit = Vec::with_capacity(clip_steps);
     let mut residual_force = Vec::with_capacity(clip_steps);
     let mut fell_at = None;
+    let mut fell_body = None;
     let mut feet = Vec::with_capacity(clip_steps);
     for t in 0..clip_steps {
         act(&obs, &mut action)?;
@@ -80,6 +84,10 @@ where
         feet.push(env.foot_contacts());
         if step.terminated {
             fell_at = Some(t);
+            fell_body = step
+                .info
+                .fallen_body
+                .map(|b| env.spec().bodies[b].name.clone());
             break;
         }
         if step.truncated {
@@ -94,6 +102,7 @@ where
         r_imit,
         residual_force,
         fell_at,
+        fell_body,
         feet,
         total_mass_kg: env.spec().total_mass as f64,
         motion,

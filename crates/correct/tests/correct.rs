@@ -193,6 +193,48 @@ fn a_clip_held_up_by_the_root_force_is_rejected() {
     assert!(soles.planted_frames > 10, "{soles:?}");
 }
 
+/// Without the root force and with every joint bent far off its target the
+/// kick collapses: the judgement says at which step of how many it fell and
+/// what touched the ground, and the output holds the frames simulated up to
+/// the fall (so `frames` in a report is not the clip's length).
+#[test]
+fn a_fall_is_judged_with_its_step_and_the_body_that_touched() {
+    let mut config = CorrectConfig::default();
+    config.physics.residual = physics::Residual::None;
+    let clip = kick();
+    let mut env = physics::ImitationEnv::new(&clip, &config.physics).unwrap();
+    let feet: Vec<String> = env
+        .spec()
+        .feet
+        .iter()
+        .map(|&b| env.spec().bodies[b].name.clone())
+        .collect();
+    let rollout = correct::deterministic_rollout(&mut env, |_, a| {
+        a.fill(1.5);
+        Ok(())
+    })
+    .unwrap();
+    let t = rollout.fell_at.expect("the bent character falls");
+    let body = rollout.fell_body.clone().expect("the fall names a body");
+    assert!(!feet.contains(&body), "{body} is a foot");
+    assert!(
+        t + 1 < rollout.clip_steps,
+        "fell at {t} of {}",
+        rollout.clip_steps
+    );
+    assert_eq!(rollout.motion.frames(), t + 2);
+    let before = motion::metrics::plausibility(&clip);
+    let after = motion::metrics::plausibility(&rollout.motion);
+    let criteria = correct::acceptance::judge(&rollout, &before, &after, &config.acceptance);
+    let no_fall = criteria.iter().find(|c| c.name == "no_fall").unwrap();
+    assert!(!no_fall.passed);
+    let said = format!(
+        "fell at control step {t} of {} ({body} touched the ground)",
+        rollout.clip_steps
+    );
+    assert!(no_fall.meaning.contains(&said), "{no_fall:?}");
+}
+
 /// Feet built in the frame of the standing foot stand on their soles: with
 /// the untrained tracker on the bundled kick, the rest-pose boxes stand on a
 /// corner (no planted frame flat) and the calibrated ones mostly flat.

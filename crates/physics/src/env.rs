@@ -192,6 +192,9 @@ pub struct StepInfo {
     /// |tau| of the root residual torque (N m).
     pub residual_torque: f32,
     pub fell: bool,
+    /// The first body (index into the character's bodies) that touched the
+    /// ground where the reference does not, when the step ended in a fall.
+    pub fallen_body: Option<usize>,
     /// MotionAug's reward of the step, `0.9 r_imit + 0.1 r_res` (0 on a
     /// fall), whatever the training reward's extra terms: what acceptance
     /// judges.
@@ -258,8 +261,9 @@ struct Substeps {
     /// Mean |F| and |tau| of the root residual over the substeps.
     mean_force: f32,
     mean_torque: f32,
-    /// A non-foot body touched the ground (see [`ImitationEnv::step`]).
-    fell: bool,
+    /// The first non-foot body that touched the ground where the reference
+    /// does not (a fall, see [`ImitationEnv::step`]).
+    fallen_body: Option<usize>,
 }
 
 fn heading_of(rot: Quat, forward: Vec3, heading0: f32) -> Quat {
@@ -574,7 +578,7 @@ impl ImitationEnv {
     fn run_substeps(&mut self, k: usize, force: Vec3, torque: Vec3) -> Substeps {
         let (mut force, mut torque) = (force, torque);
         let (mut sum_f, mut sum_t) = (0.0f32, 0.0f32);
-        let mut fell = false;
+        let mut fallen_body = None;
         let inv = 1.0 / self.substeps as f32;
         for sub in 0..self.substeps {
             let alpha = sub as f32 * inv;
@@ -587,14 +591,14 @@ impl ImitationEnv {
             sum_t += torque.length();
             self.sim
                 .substep(&self.targets, &self.target_vel, force, torque);
-            if !fell {
-                fell = self.fallen(k + 1);
+            if fallen_body.is_none() {
+                fallen_body = self.fallen(k + 1);
             }
         }
         Substeps {
             mean_force: sum_f * inv,
             mean_torque: sum_t * inv,
-            fell,
+            fallen_body,
         }
     }
 
@@ -660,7 +664,7 @@ impl ImitationEnv {
                 broken = true;
             }
         }
-        let fell = run.fell;
+        let fell = run.fallen_body.is_some();
         let (reward, paper_reward, r_imit) = if fell {
             (-self.config.fall_penalty, 0.0, 0.0)
         } else if broken || !r_imit.is_finite() {
@@ -685,6 +689,7 @@ impl ImitationEnv {
                 residual_force: run.mean_force,
                 residual_torque: run.mean_torque,
                 fell,
+                fallen_body: run.fallen_body,
                 paper_reward,
                 frame: self.frame,
             },
@@ -725,9 +730,11 @@ impl ImitationEnv {
         )
     }
 
-    fn fallen(&self, k: usize) -> bool {
+    /// The first non-foot body touching the ground while the reference's
+    /// frame `k` holds it above the contact tolerance.
+    fn fallen(&self, k: usize) -> Option<usize> {
         let lowest = &self.reference.frames[k].lowest;
-        (0..self.spec.bodies.len()).any(|b| {
+        (0..self.spec.bodies.len()).find(|&b| {
             !self.spec.feet.contains(&b)
                 && lowest[b] > self.config.contact_tolerance
                 && self.sim.touches_ground(b)

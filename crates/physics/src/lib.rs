@@ -54,6 +54,7 @@
 //! CMU walk, table in [`sim`]) or a solver other than rapier's; neither is
 //! done.
 
+pub mod balance;
 pub mod bench;
 pub mod character;
 pub mod env;

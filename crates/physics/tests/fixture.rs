@@ -496,8 +496,9 @@ fn the_reference_follows_translation_tracks() {
 }
 
 /// Without the root force and with every joint bent far off its target the
-/// character collapses; the step that ends in the fall pays the fall
-/// penalty in the training reward and nothing in the paper's.
+/// character collapses; the step that ends in the fall names a body that is
+/// not a foot, and pays the fall penalty in the training reward and nothing
+/// in the paper's.
 #[test]
 fn a_fall_pays_the_fall_penalty_in_the_training_reward_only() {
     let motion = sway(cmu_humanoid(), 3.0, 120.0);
@@ -512,13 +513,15 @@ fn a_fall_pays_the_fall_penalty_in_the_training_reward_only() {
         loop {
             let r = env.step(&action).unwrap();
             if r.done {
-                return r;
+                return (r, env.spec().feet.clone());
             }
         }
     };
     for penalty in [0.0, 5.0] {
-        let r = fall(penalty);
+        let (r, feet) = fall(penalty);
         assert!(r.terminated && r.info.fell, "{r:?}");
+        let body = r.info.fallen_body.expect("the fall names a body");
+        assert!(!feet.contains(&body), "a foot is not a fall: {r:?}");
         assert_eq!(r.reward, -penalty);
         assert_eq!(r.info.paper_reward, 0.0);
     }

@@ -1,6 +1,8 @@
-//! `motionaug metrics FILE --json [--soles]`: physical plausibility of a clip,
-//! and with `--soles` the correction's soles criterion scored on the clip as
-//! given (so synthesised clips can be judged before paying for a correction).
+//! `motionaug metrics FILE --json [--soles] [--balance]`: physical
+//! plausibility of a clip, and with `--soles` the correction's soles criterion
+//! scored on the clip as given, with `--balance` how far its zero moment point
+//! leaves its feet (so synthesised clips can be judged before paying for a
+//! correction).
 
 use std::path::PathBuf;
 
@@ -23,6 +25,26 @@ pub struct Args {
     /// so it takes a moment longer.
     #[arg(long)]
     soles: bool,
+    /// Also measure whether the clip can balance on its feet: with the
+    /// simulated character's masses and foot boxes, how far the zero moment
+    /// point (where the floor must push for the centre of mass to move as it
+    /// does) lies outside the polygon of the feet on the floor, over the
+    /// frames a foot is down.
+    #[arg(long)]
+    balance: bool,
+}
+
+/// The input's zero moment point against its support polygon.
+#[derive(serde::Serialize)]
+struct Balance {
+    supported_frames: usize,
+    /// Supported frames with the ZMP more than `margin_m` outside.
+    unbalanced_frames: usize,
+    unbalanced_fraction: f64,
+    margin_m: f64,
+    /// Mean and largest distance outside over the supported frames, m.
+    mean_outside_m: f64,
+    max_outside_m: f64,
 }
 
 /// The soles criterion on the input clip.
@@ -47,12 +69,14 @@ struct Report {
     plausibility: motion::metrics::Plausibility,
     #[serde(skip_serializing_if = "Option::is_none")]
     soles: Option<Soles>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    balance: Option<Balance>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let motion = args.clip.load(&args.file)?;
+    let config = correct::CorrectConfig::default();
     let soles = if args.soles {
-        let config = correct::CorrectConfig::default();
         let s = correct::acceptance::input_soles(&motion, &config.physics, &config.acceptance)?;
         Some(Soles {
             planted_frames: s.planted_frames,
@@ -66,9 +90,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         None
     };
+    let balance = if args.balance {
+        let b = correct::acceptance::input_balance(&motion, &config.physics, &config.acceptance)?;
+        Some(Balance {
+            supported_frames: b.supported_frames,
+            unbalanced_frames: b.unbalanced_frames,
+            unbalanced_fraction: b.unbalanced_fraction(),
+            margin_m: b.margin_m,
+            mean_outside_m: b.mean_outside_m(),
+            max_outside_m: b.outside_max_m,
+        })
+    } else {
+        None
+    };
     let report = Report {
         plausibility: motion::metrics::plausibility(&motion),
         soles,
+        balance,
     };
     let text = if args.json {
         serde_json::to_string_pretty(&report)? + "\n"
