@@ -304,6 +304,41 @@ fn metrics_scores_the_soles_criterion_on_the_clip_itself() {
     // The plain table names the nested figures.
     let table = ok(motionaug(&["metrics", JOG, "--skeleton", ASF, "--soles"]));
     assert!(table.contains("soles.flat_fraction"), "{table}");
+    assert!(v.get("balance").is_none(), "only when asked");
+}
+
+/// `--balance` counts the frames a foot is down and how far the zero moment
+/// point leaves the feet over them; its figures agree with each other.
+#[test]
+fn metrics_measures_the_balance_of_the_clip_itself() {
+    let text = ok(motionaug(&[
+        "metrics",
+        JOG,
+        "--skeleton",
+        ASF,
+        "--json",
+        "--balance",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let b = &v["balance"];
+    let supported = b["supported_frames"].as_u64().unwrap();
+    let unbalanced = b["unbalanced_frames"].as_u64().unwrap();
+    assert!(supported > 10 && unbalanced <= supported, "{b}");
+    let fraction = b["unbalanced_fraction"].as_f64().unwrap();
+    assert!(
+        (fraction - unbalanced as f64 / supported as f64).abs() < 1e-12,
+        "{b}"
+    );
+    let (mean, max) = (
+        b["mean_outside_m"].as_f64().unwrap(),
+        b["max_outside_m"].as_f64().unwrap(),
+    );
+    assert!(mean >= 0.0 && mean <= max && max.is_finite(), "{b}");
+    assert!(
+        unbalanced == 0 || max > b["margin_m"].as_f64().unwrap(),
+        "{b}"
+    );
+    assert!(v.get("soles").is_none(), "only when asked");
 }
 
 #[test]

@@ -210,6 +210,43 @@ mod tests {
         assert_eq!(distance_outside_hull(&[], Vec2::ZERO), f32::INFINITY);
     }
 
+    /// Standing and swaying the arms, the ZMP stays within the feet; the same
+    /// pose carried forward (along the feet, which are 23 cm long) at 4 m/s^2,
+    /// the feet with it, needs the floor to push from h a / g, about 0.3 m,
+    /// behind the centre of mass.
+    #[test]
+    fn a_standing_clip_balances_and_an_accelerating_one_does_not() {
+        use crate::fixtures::{cmu_humanoid, sway};
+        let still = sway(cmu_humanoid(), 2.0, 60.0);
+        let judge = |m: &motion::Motion| {
+            ImitationEnv::new(m, &crate::Config::default())
+                .unwrap()
+                .reference_balance(0.02)
+        };
+        let stances = judge(&still);
+        assert!(stances.len() > 50);
+        for st in &stances {
+            match *st {
+                Stance::Supported { outside_m } => assert!(outside_m < 0.02, "{st:?}"),
+                Stance::Unsupported => panic!("standing is supported"),
+            }
+        }
+        let mut pushed = still.clone();
+        let fps = pushed.fps();
+        for (f, r) in pushed.root_translation_mut().iter_mut().enumerate() {
+            let t = f as f64 / fps;
+            r.z += 0.5 * 4.0 * t * t;
+        }
+        let stances = judge(&pushed);
+        // The ends of the resampled clip are one-sided; judge the middle.
+        for st in &stances[2..stances.len() - 2] {
+            match *st {
+                Stance::Supported { outside_m } => assert!(outside_m > 0.1, "{st:?}"),
+                Stance::Unsupported => panic!("the feet are on the floor"),
+            }
+        }
+    }
+
     proptest! {
         /// Every input point is inside its hull; outside points are no
         /// farther than the nearest input point and the distance moves with

@@ -32,6 +32,8 @@
 //!                           #   (optional; default: max_iterations)
 //! residual = "pd"           # pd | none | learned
 //! plant_reference = false   # imitate the root re-integrated from the planted feet
+//! fall_penalty = 0.0        # training reward of a step that ends in a fall, negated
+//!                           #   (acceptance reads the paper's reward, 0 on a fall)
 //! keep_rejected = false     # keep clips that fail acceptance (marked in the manifest)
 //! accept_threshold = 0.7    # acceptance (correct::acceptance): mean reward at least,
 //! max_residual_force_ratio = 0.1  # root force / body weight at most,
@@ -210,6 +212,12 @@ pub struct CorrectStep {
     /// (`physics::Config::plant_reference`); acceptance still compares the
     /// output with the clip as given.
     pub plant_reference: bool,
+    /// The training reward of a step that ends in a fall, negated, in every
+    /// correction and tracker (`physics::Config::fall_penalty`; 0, the
+    /// paper's, by default). Written only when set, so recipes saved before
+    /// it existed serialise as they did.
+    #[serde(skip_serializing_if = "is_zero_f32")]
+    pub fall_penalty: f32,
     /// Stop a clip's training once its rollout reaches this R_norm (and is accepted).
     pub target_r_norm: f64,
     /// Mean per-step reward a corrected clip needs to be kept (paper: 0.7).
@@ -265,6 +273,10 @@ pub struct CorrectStep {
     pub tracker_final_residual_scale: Option<f32>,
 }
 
+fn is_zero_f32(x: &f32) -> bool {
+    *x == 0.0
+}
+
 /// See [`CorrectStep::policy`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -301,6 +313,7 @@ impl Default for CorrectStep {
             original_max_iterations: None,
             residual: ResidualKind::Pd,
             plant_reference: c.physics.plant_reference,
+            fall_penalty: c.physics.fall_penalty,
             target_r_norm: c.target_r_norm.unwrap_or(0.8),
             accept_threshold: c.acceptance.min_mean_reward,
             max_residual_force_ratio: c.acceptance.max_residual_force_ratio,
@@ -347,6 +360,7 @@ impl CorrectStep {
         };
         c.physics.residual = self.residual.physics();
         c.physics.plant_reference = self.plant_reference;
+        c.physics.fall_penalty = self.fall_penalty;
         // Lowered over the clip's whole fine-tuning, when it is bounded: the
         // gains reach the final scale at the last iteration allowed.
         if let (Some(_), Some(n)) = (self.tracker_final_residual_scale, self.max_iterations)

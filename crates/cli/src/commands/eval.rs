@@ -536,6 +536,13 @@ struct PhysicsArgs {
     /// settings: use a fresh work folder to measure it.
     #[arg(long)]
     plant_reference: bool,
+    /// The training reward of a step that ends in a fall, negated, in the
+    /// trackers and every correction (`[correct] fall_penalty`; the paper's
+    /// reward, which acceptance reads, stays 0 on a fall). Finished
+    /// corrections and trackers in `--work` are reused whatever their
+    /// settings: use a fresh work folder to measure it.
+    #[arg(long, default_value_t = 0.0)]
+    fall_penalty: f32,
 }
 
 /// The table's correction policy, as the CLI spells it.
@@ -692,6 +699,7 @@ impl TableArgs {
                 debias_hold_out: p.debias_hold_out.into(),
                 tracker_final_residual_scale: p.tracker_final_residual_scale,
                 plant_reference: p.plant_reference,
+                fall_penalty: p.fall_penalty,
             },
             kept_rows: self.kept_rows,
             threads: usize::from(self.threads),

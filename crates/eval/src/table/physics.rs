@@ -117,6 +117,17 @@ pub struct PhysicsConfig {
     /// whatever their settings: measure it in a fresh one.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub plant_reference: bool,
+    /// The training reward of a step that ends in a fall, negated, in the
+    /// trackers and every correction (`[correct] fall_penalty`). Left out of
+    /// the config's JSON when 0 (the default). Finished corrections and
+    /// trackers in the work folder are reused whatever their settings:
+    /// measure it in a fresh one.
+    #[serde(default, skip_serializing_if = "is_zero_f32")]
+    pub fall_penalty: f32,
+}
+
+fn is_zero_f32(x: &f32) -> bool {
+    *x == 0.0
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -154,6 +165,7 @@ impl Default for PhysicsConfig {
             debias_hold_out: debias::HoldOut::Clips,
             tracker_final_residual_scale: None,
             plant_reference: false,
+            fall_penalty: 0.0,
         }
     }
 }
@@ -459,6 +471,7 @@ fn correct_step(config: &PhysicsConfig) -> pipeline::CorrectStep {
         skate_scale_when_skating_m_s: config.skate_scale_when_skating_m_s,
         tracker_final_residual_scale: config.tracker_final_residual_scale,
         plant_reference: config.plant_reference,
+        fall_penalty: config.fall_penalty,
         ..pipeline::CorrectStep::default()
     }
 }
@@ -743,6 +756,7 @@ mod tests {
         assert!(json.get("tracker_final_residual_scale").is_none());
         assert!(json.get("debias_hold_out").is_none());
         assert!(json.get("plant_reference").is_none());
+        assert!(json.get("fall_penalty").is_none());
         let back: PhysicsConfig = serde_json::from_value(json.clone()).unwrap();
         assert!(back.debias_restore_contacts);
         assert_eq!(back.debias_smoothing_s, 0.05);
@@ -850,6 +864,30 @@ mod tests {
         assert!(step.tracker_config(0).correct.physics.plant_reference);
         let as_captured = super::correct_step(&PhysicsConfig::default());
         assert!(!as_captured.config(0).physics.plant_reference);
+    }
+
+    #[test]
+    fn a_fall_penalty_reaches_the_trackers_every_correction_and_the_saved_config() {
+        let penalised = PhysicsConfig {
+            policy: pipeline::PolicyKind::Class,
+            fall_penalty: 10.0,
+            ..PhysicsConfig::default()
+        };
+        penalised.validate().expect("valid");
+        let json = serde_json::to_value(&penalised).unwrap();
+        assert_eq!(json["fall_penalty"], 10.0);
+        let back: PhysicsConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(back, penalised);
+        let step = super::correct_step(&penalised);
+        assert_eq!(step.config(0).physics.fall_penalty, 10.0);
+        assert_eq!(step.original_config(0).physics.fall_penalty, 10.0);
+        assert_eq!(step.tracker_config(0).correct.physics.fall_penalty, 10.0);
+        let negative = PhysicsConfig {
+            fall_penalty: -1.0,
+            ..penalised
+        };
+        let e = negative.validate().expect_err("negative").to_string();
+        assert!(e.contains("fall penalty"), "{e}");
     }
 
     #[test]
