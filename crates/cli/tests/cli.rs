@@ -271,17 +271,22 @@ fn metrics_json_reports_plausibility() {
     assert!(v.get("soles").is_none(), "soles only when asked: {v}");
 }
 
-#[test]
-fn metrics_scores_the_soles_criterion_on_the_clip_itself() {
+/// `motionaug metrics JOG --json <flag>`, parsed.
+fn jog_metrics(flag: &str) -> serde_json::Value {
     let text = ok(motionaug(&[
         "metrics",
         JOG,
         "--skeleton",
         ASF,
         "--json",
-        "--soles",
+        flag,
     ]));
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn metrics_scores_the_soles_criterion_on_the_clip_itself() {
+    let v = jog_metrics("--soles");
     let s = &v["soles"];
     let planted = s["planted_frames"].as_u64().unwrap();
     let flat = s["flat_frames"].as_u64().unwrap();
@@ -311,15 +316,7 @@ fn metrics_scores_the_soles_criterion_on_the_clip_itself() {
 /// point leaves the feet over them; its figures agree with each other.
 #[test]
 fn metrics_measures_the_balance_of_the_clip_itself() {
-    let text = ok(motionaug(&[
-        "metrics",
-        JOG,
-        "--skeleton",
-        ASF,
-        "--json",
-        "--balance",
-    ]));
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let v = jog_metrics("--balance");
     let b = &v["balance"];
     let supported = b["supported_frames"].as_u64().unwrap();
     let unbalanced = b["unbalanced_frames"].as_u64().unwrap();

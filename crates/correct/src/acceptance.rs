@@ -220,12 +220,7 @@ pub fn input_soles(
     physics: &physics::Config,
     config: &AcceptanceConfig,
 ) -> Result<SoleStats, CorrectError> {
-    // The clip as given, not the planted reference the character imitates.
-    let physics = physics::Config {
-        plant_reference: false,
-        ..physics.clone()
-    };
-    let env = physics::ImitationEnv::new(motion, &physics)?;
+    let env = input_env(motion, physics)?;
     Ok(SoleStats::of(
         &env.reference_foot_contacts(config.sole_tolerance_m as f32),
         config,
@@ -290,15 +285,24 @@ pub fn input_balance(
     physics: &physics::Config,
     config: &AcceptanceConfig,
 ) -> Result<BalanceStats, CorrectError> {
-    let physics = physics::Config {
-        plant_reference: false,
-        ..physics.clone()
-    };
-    let env = physics::ImitationEnv::new(motion, &physics)?;
+    let env = input_env(motion, physics)?;
     Ok(BalanceStats::of(
         &env.reference_balance(config.sole_tolerance_m as f32),
         BALANCE_MARGIN_M,
     ))
+}
+
+/// The environment of the clip as given, not the planted reference the
+/// character imitates: what the input measures read.
+fn input_env(
+    motion: &motion::Motion,
+    physics: &physics::Config,
+) -> Result<physics::ImitationEnv, CorrectError> {
+    let physics = physics::Config {
+        plant_reference: false,
+        ..physics.clone()
+    };
+    Ok(physics::ImitationEnv::new(motion, &physics)?)
 }
 
 /// Every criterion, judged on a rollout and the plausibility of the input and
