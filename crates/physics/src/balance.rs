@@ -83,28 +83,26 @@ fn convex_hull(points: &[Vec2]) -> Vec<Vec2> {
     if pts.len() < 3 {
         return pts;
     }
-    let mut hull: Vec<Vec2> = Vec::with_capacity(2 * pts.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
-        for &p in iter {
-            while hull.len() >= start + 2
-                && cross(
-                    hull[hull.len() - 1] - hull[hull.len() - 2],
-                    p - hull[hull.len() - 2],
-                ) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(p);
-        }
-        hull.pop();
-    }
+    // The lower chain left to right, then the upper one right to left, each
+    // without its last point (the other chain's first).
+    let mut hull = half_hull(pts.iter());
+    hull.extend(half_hull(pts.iter().rev()));
     hull
+}
+
+/// One chain of the monotone chain: the points kept turning left.
+fn half_hull<'a>(points: impl Iterator<Item = &'a Vec2>) -> Vec<Vec2> {
+    let mut chain: Vec<Vec2> = Vec::new();
+    for &p in points {
+        while let [.., a, b] = chain[..]
+            && cross(b - a, p - a) <= 0.0
+        {
+            chain.pop();
+        }
+        chain.push(p);
+    }
+    chain.pop();
+    chain
 }
 
 impl ImitationEnv {
@@ -132,7 +130,7 @@ impl ImitationEnv {
                     support.extend(
                         corners
                             .iter()
-                            .filter(|p| p.y <= touch_m.max(low))
+                            .filter(|p| p.y <= touch_m)
                             .map(|p| Vec2::new(p.x, p.z)),
                     );
                 }

@@ -70,7 +70,7 @@ pub fn bench_physics_for(
             err_sum += env.joint_error() as f64;
             rew_sum += r.r_imit as f64;
             force_sum += r.info.residual_force as f64;
-            if r.info.fell {
+            if r.info.fell() {
                 falls += 1;
                 let last = env.reference().len() - 1;
                 let next = env.frame() + 1;

@@ -64,7 +64,7 @@ fn standing_sway_is_tracked_with_action_zero() {
         let r = env.step(&action).unwrap();
         err += env.joint_error();
         steps += 1;
-        assert!(!r.info.fell, "fell at frame {}", r.info.frame);
+        assert!(!r.info.fell(), "fell at frame {}", r.info.frame);
         if r.done {
             // The clip ran out: a truncation, not a failure.
             assert!(r.truncated && !r.terminated);
@@ -519,7 +519,7 @@ fn a_fall_pays_the_fall_penalty_in_the_training_reward_only() {
     };
     for penalty in [0.0, 5.0] {
         let (r, feet) = fall(penalty);
-        assert!(r.terminated && r.info.fell, "{r:?}");
+        assert!(r.terminated && r.info.fell(), "{r:?}");
         let body = r.info.fallen_body.expect("the fall names a body");
         assert!(!feet.contains(&body), "a foot is not a fall: {r:?}");
         assert_eq!(r.reward, -penalty);

@@ -51,7 +51,7 @@ fn track(motion: &Motion, cfg: &Config, max_steps: usize, verbose: bool) -> (f32
                 env.body_states()[0].pos
             );
         }
-        if r.info.fell {
+        if r.info.fell() {
             if verbose {
                 let s = env.body_states();
                 let touching: Vec<String> = (0..s.len())
