@@ -166,6 +166,9 @@ pub struct VaeTraining {
     pub mixed_sole_weight: f64,
     /// `vae::LossWeights::mixed_travel` (0: off, the vae crate's default).
     pub mixed_travel_weight: f64,
+    /// `vae::LossWeights::mixed_balance` (0: off, the vae crate's default),
+    /// with the correction's default character.
+    pub mixed_balance_weight: f64,
     /// `vae::FootLoss::skating` (`None`: the vae crate's default).
     pub skating_weight: Option<f64>,
     /// Put the training clips on one floor (`vae::FloorLevel`, the vae
@@ -183,6 +186,7 @@ impl Default for VaeTraining {
             mixed_contact_weight: 0.0,
             mixed_sole_weight: 0.0,
             mixed_travel_weight: 0.0,
+            mixed_balance_weight: 0.0,
             skating_weight: None,
             level_floor: true,
         }
@@ -205,6 +209,9 @@ impl VaeTraining {
         }
         if self.mixed_travel_weight > 0.0 {
             name.push_str(&format!("-mixed-travel-{}", self.mixed_travel_weight));
+        }
+        if self.mixed_balance_weight > 0.0 {
+            name.push_str(&format!("-mixed-balance-{}", self.mixed_balance_weight));
         }
         if let Some(w) = self.skating_weight {
             name.push_str(&format!("-skating-{w}"));
@@ -229,6 +236,7 @@ impl VaeTraining {
         config.weights.mixed_contact = self.mixed_contact_weight;
         config.weights.mixed_sole = self.mixed_sole_weight;
         config.weights.mixed_travel = self.mixed_travel_weight;
+        config.weights.mixed_balance = self.mixed_balance_weight;
         if let Some(w) = self.skating_weight {
             config.feet.skating = w;
         }
@@ -252,9 +260,18 @@ pub fn train_vae(
     log: Log,
 ) -> Result<TrainedVae> {
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
-    let config = training.config(seed);
+    let mut config = training.config(seed);
+    if config.weights.mixed_balance > 0.0
+        && let Some(first) = clips.first()
+    {
+        config.balance = Some(pipeline::vae_balance_model(
+            first,
+            &Default::default(),
+            correct::AcceptanceConfig::default().sole_tolerance_m as f32,
+        )?);
+    }
     log(&format!(
-        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, mixed travel weight {}, skating weight {}, {}",
+        "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, mixed travel weight {}, mixed balance weight {}, skating weight {}, {}",
         clips.len(),
         config.iterations,
         config.adversarial,
@@ -263,6 +280,7 @@ pub fn train_vae(
         config.weights.mixed_contact,
         config.weights.mixed_sole,
         config.weights.mixed_travel,
+        config.weights.mixed_balance,
         config.feet.skating,
         if config.features.floor.is_some() {
             "clips on one floor"
@@ -352,13 +370,14 @@ mod tests {
             mixed_contact_weight: 0.3,
             mixed_sole_weight: 0.5,
             mixed_travel_weight: 2.0,
+            mixed_balance_weight: 0.5,
             skating_weight: Some(0.3),
             level_floor: false,
             ..plain
         };
         assert_eq!(
             all.folder_name("vae_noadv"),
-            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-mixed-sole-0.5-mixed-travel-2-skating-0.3"
+            "vae_noadv-300it-mixed-motion-1-mixed-contact-0.3-mixed-sole-0.5-mixed-travel-2-mixed-balance-0.5-skating-0.3"
         );
     }
 

@@ -5,6 +5,7 @@
 //! graph in Postgres and hands its jobs to workers that call the same
 //! executor over HTTP inputs.
 
+pub mod balance;
 pub mod codec;
 pub mod exec;
 pub mod manifest;
@@ -13,6 +14,7 @@ pub mod recipe;
 pub mod run;
 pub mod stages;
 
+pub use balance::vae_balance_model;
 pub use codec::{decode_clip, encode_clip};
 pub use exec::{Context, Inputs, Made, Outputs, WorkClip, execute};
 pub use manifest::{CorrectionSummary, ManifestEntry};

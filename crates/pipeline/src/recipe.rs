@@ -16,6 +16,10 @@
 //! prior = "near"            # near | normal
 //! near_members = 2          # near codes between this many clips of a cluster
 //! mixed_motion_weight = 0.0 # > 0: codes between clips decode to motion as fast as theirs
+//! mixed_contact_weight = 0.0 # > 0: ... with as many frames on the ground as theirs
+//! mixed_sole_weight = 0.0   # > 0: ... their planted feet on their soles
+//! mixed_travel_weight = 0.0 # > 0: ... travelling, quarter by quarter, like theirs
+//! mixed_balance_weight = 0.0 # > 0: ... their zero moment point no further outside the feet
 //! smooth_s = 0.05           # low-pass each sample (seconds; 0 = as decoded): decoded clips jitter
 //! plant_root = true         # re-integrate each sample's root from its planted feet
 //! level_floor = true        # train on every clip moved onto one floor (actors stand 0-3 cm apart)
@@ -89,6 +93,21 @@ pub struct VaeStep {
     /// Samples then move like the class instead of standing nearly still, but
     /// on jog fewer pass physical correction (crates/vae/README.md, session 18).
     pub mixed_motion_weight: f64,
+    /// `vae::LossWeights::mixed_contact` (0: off; written only when set).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub mixed_contact_weight: f64,
+    /// `vae::LossWeights::mixed_sole` (0: off; written only when set).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub mixed_sole_weight: f64,
+    /// `vae::LossWeights::mixed_travel` (0: off; written only when set).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub mixed_travel_weight: f64,
+    /// `vae::LossWeights::mixed_balance` with the correction's default
+    /// character (`vae_balance_model`): samples whose zero moment point
+    /// leaves the feet fall in the simulator (crates/vae/README.md, session
+    /// 36). 0: off; written only when set.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub mixed_balance_weight: f64,
     /// Low-pass each sample with a Gaussian of this many seconds (0: as
     /// decoded; `vae::Finish`): decoded clips jitter, and smoothed jog samples
     /// pass physical correction 15/30 where the same samples raw pass 2/30
@@ -114,6 +133,10 @@ impl VaeStep {
         };
         config.near.members = self.near_members;
         config.weights.mixed_motion = self.mixed_motion_weight;
+        config.weights.mixed_contact = self.mixed_contact_weight;
+        config.weights.mixed_sole = self.mixed_sole_weight;
+        config.weights.mixed_travel = self.mixed_travel_weight;
+        config.weights.mixed_balance = self.mixed_balance_weight;
         config.features.floor = self.level_floor.then(vae::FloorLevel::default);
         config
     }
@@ -142,6 +165,10 @@ impl Default for VaeStep {
             min_clips: 2,
             near_members: vae::NearConfig::default().members,
             mixed_motion_weight: 0.0,
+            mixed_contact_weight: 0.0,
+            mixed_sole_weight: 0.0,
+            mixed_travel_weight: 0.0,
+            mixed_balance_weight: 0.0,
             smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             plant_root: true,
             level_floor: true,
@@ -274,6 +301,10 @@ pub struct CorrectStep {
 }
 
 fn is_zero_f32(x: &f32) -> bool {
+    *x == 0.0
+}
+
+fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }
 
@@ -703,11 +734,19 @@ impl Recipe {
                 return Err(err("[vae]", "`near_members` must be at least 1"));
             }
             bounds::VAE_NEAR_MEMBERS.check(v.near_members as f64)?;
-            if !(v.mixed_motion_weight.is_finite() && v.mixed_motion_weight >= 0.0) {
-                return Err(err(
-                    "[vae]",
-                    "`mixed_motion_weight` must be a finite number >= 0",
-                ));
+            for (name, w) in [
+                ("mixed_motion_weight", v.mixed_motion_weight),
+                ("mixed_contact_weight", v.mixed_contact_weight),
+                ("mixed_sole_weight", v.mixed_sole_weight),
+                ("mixed_travel_weight", v.mixed_travel_weight),
+                ("mixed_balance_weight", v.mixed_balance_weight),
+            ] {
+                if !(w.is_finite() && w >= 0.0) {
+                    return Err(err(
+                        "[vae]",
+                        format!("`{name}` must be a finite number >= 0"),
+                    ));
+                }
             }
             if !(v.smooth_s.is_finite() && v.smooth_s >= 0.0) {
                 return Err(err("[vae]", "`smooth_s` must be a finite number >= 0"));

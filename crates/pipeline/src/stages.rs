@@ -67,8 +67,17 @@ pub fn vae(
 ) -> Result<Vec<NewClip>, PipelineError> {
     let span = tracing::info_span!("vae_job", group, clips = clips.len());
     let _guard = span.enter();
-    let config = step.train_config(seed);
+    let mut config = step.train_config(seed);
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
+    if config.weights.mixed_balance > 0.0
+        && let Some(first) = motions.first()
+    {
+        config.balance = Some(crate::vae_balance_model(
+            first,
+            &physics::CharacterOptions::default(),
+            correct::AcceptanceConfig::default().sole_tolerance_m as f32,
+        )?);
+    }
     let model = vae::train(&motions, &config, |_| {})?;
     let samples = model.sample_finished(step.copies as usize, step.prior, seed, &step.finish())?;
     let names = crate::plan::vae_outputs(group, step.copies);

@@ -100,11 +100,13 @@ fn recipes_are_validated_with_the_table_and_field_named() {
     );
     let e = recipe_err("[[ops]]\nop = \"noise\"\n[correct]\naccept_threshold = 2\n");
     assert!(e.contains("accept_threshold"), "{e}");
-    let e = recipe_err("[vae]\nmixed_motion_weight = -0.5\n");
-    assert!(
-        e.contains("[vae]") && e.contains("mixed_motion_weight"),
-        "{e}"
-    );
+    for term in ["motion", "contact", "sole", "travel", "balance"] {
+        let e = recipe_err(&format!("[vae]\nmixed_{term}_weight = -0.5\n"));
+        assert!(
+            e.contains("[vae]") && e.contains(&format!("mixed_{term}_weight")),
+            "{e}"
+        );
+    }
     for bad in ["-0.01", "5.0"] {
         let e = recipe_err(&format!("[vae]\nsmooth_s = {bad}\n"));
         assert!(e.contains("[vae]") && e.contains("smooth_s"), "{e}");
@@ -464,25 +466,38 @@ fn the_vae_trains_on_one_floor_unless_told_to_keep_the_captured_ones() {
     };
     assert_eq!(floor("[vae]\n"), Some(vae::FloorLevel::default()));
     assert_eq!(floor("[vae]\nlevel_floor = false\n"), None);
-    let step = Recipe::from_toml_str("[vae]\nmixed_motion_weight = 2\nnear_members = 3\n")
-        .expect("recipe")
-        .vae
-        .expect("a [vae] table");
+    let step = Recipe::from_toml_str(
+        "[vae]\nmixed_motion_weight = 2\nnear_members = 3\nmixed_contact_weight = 0.3\n\
+         mixed_sole_weight = 0.5\nmixed_travel_weight = 0.7\nmixed_balance_weight = 0.9\n",
+    )
+    .expect("recipe")
+    .vae
+    .expect("a [vae] table");
     let config = step.train_config(5);
+    let w = config.weights;
+    assert_eq!(
+        (w.mixed_motion, config.near.members, config.seed),
+        (2.0, 3, 5)
+    );
     assert_eq!(
         (
-            config.weights.mixed_motion,
-            config.near.members,
-            config.seed
+            w.mixed_contact,
+            w.mixed_sole,
+            w.mixed_travel,
+            w.mixed_balance
         ),
-        (2.0, 3, 5)
+        (0.3, 0.5, 0.7, 0.9)
     );
 }
 
 #[test]
 fn vae_table_trains_per_class_and_samples() {
     let recipe = Recipe::from_toml_str(
-        "[vae]\ncopies = 3\niterations = 2\nmin_clips = 1\nadversarial = false\n",
+        // Every mixed-code term on: the balance term needs the character's
+        // masses and soles, which the stage builds (training fails without).
+        "[vae]\ncopies = 3\niterations = 2\nmin_clips = 1\nadversarial = false\n\
+         mixed_motion_weight = 1\nmixed_contact_weight = 0.3\nmixed_sole_weight = 1\n\
+         mixed_travel_weight = 1\nmixed_balance_weight = 1\n",
     )
     .expect("recipe");
     let clips = [kick()];

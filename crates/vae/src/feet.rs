@@ -172,6 +172,32 @@ fn soles_of(skeleton: &Skeleton, points: &[(usize, Option<motion::glam::DVec3>)]
     soles
 }
 
+/// The joints marked `on_chain`, each with its parent's chain index, and
+/// each skeleton joint's chain index (`usize::MAX` off the chain). Joints
+/// are in topological order: a parent is on the chain before its child.
+fn chain_of(skeleton: &Skeleton, on_chain: &[bool]) -> (Vec<ChainJoint>, Vec<usize>) {
+    let mut index = vec![usize::MAX; skeleton.len()];
+    let mut chain = Vec::new();
+    for j in (0..skeleton.len()).filter(|&j| on_chain[j]) {
+        index[j] = chain.len();
+        chain.push(ChainJoint {
+            joint: j,
+            parent: skeleton.parent(j).map(|p| index[p]),
+            offset: row(skeleton.joint(j).offset),
+        });
+    }
+    (chain, index)
+}
+
+/// The columns of the chain joints' 6D rotations in a raw frame (`u32`).
+fn columns_of(chain: &[ChainJoint]) -> Result<Tensor> {
+    let columns: Vec<u32> = chain
+        .iter()
+        .flat_map(|c| (0..6).map(move |k| (3 + 6 * c.joint + k) as u32))
+        .collect();
+    Ok(Tensor::from_vec(columns, 6 * chain.len(), &Device::Cpu)?)
+}
+
 /// A constant offset as a row vector.
 fn row(v: motion::glam::DVec3) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
@@ -191,52 +217,56 @@ impl FootKinematics {
                 on_chain[a] = true;
             }
         }
-        let mut index = vec![usize::MAX; skeleton.len()];
-        let mut chain = Vec::new();
-        // Joints are in topological order: a parent is on the chain before its child.
-        for j in (0..skeleton.len()).filter(|&j| on_chain[j]) {
-            index[j] = chain.len();
-            chain.push(ChainJoint {
-                joint: j,
-                parent: skeleton.parent(j).map(|p| index[p]),
-                offset: row(skeleton.joint(j).offset),
-            });
-        }
+        let (chain, index) = chain_of(skeleton, &on_chain);
         let points = feet.iter().map(|&(j, e)| (index[j], e.map(row))).collect();
         let soles = soles_of(skeleton, &feet);
-        let columns: Vec<u32> = chain
-            .iter()
-            .flat_map(|c| (0..6).map(move |k| (3 + 6 * c.joint + k) as u32))
-            .collect();
-        let columns = Tensor::from_vec(columns, 6 * chain.len(), &Device::Cpu)?;
         Ok(Some(FootKinematics {
             joints: skeleton.len(),
+            columns: columns_of(&chain)?,
             chain,
             points,
-            columns,
             soles,
         }))
+    }
+
+    /// Forward kinematics of points fixed in joints' frames: `(joint, offset
+    /// in its frame, m)` each; what [`crate::balance`] places the simulated
+    /// character's body masses and foot soles with.
+    pub fn at_offsets(skeleton: &Skeleton, points: &[(usize, [f32; 3])]) -> Result<Self> {
+        if let Some(&(j, _)) = points.iter().find(|(j, _)| *j >= skeleton.len()) {
+            return Err(VaeError::Config(format!(
+                "a point on joint {j} of a {}-joint skeleton",
+                skeleton.len()
+            )));
+        }
+        let mut on_chain = vec![false; skeleton.len()];
+        for &(j, _) in points {
+            on_chain[j] = true;
+            for a in skeleton.ancestors(j) {
+                on_chain[a] = true;
+            }
+        }
+        let (chain, index) = chain_of(skeleton, &on_chain);
+        Ok(FootKinematics {
+            joints: skeleton.len(),
+            points: points.iter().map(|&(j, o)| (index[j], Some(o))).collect(),
+            columns: columns_of(&chain)?,
+            chain,
+            soles: Vec::new(),
+        })
     }
 
     /// Forward kinematics of every joint's own position (no end sites): what
     /// the pose speed metric (`motion::metrics::Plausibility::pose_speed_m_s`)
     /// watches.
     pub fn all_joints(skeleton: &Skeleton) -> Result<Self> {
-        let mut chain = Vec::with_capacity(skeleton.len());
-        for j in 0..skeleton.len() {
-            chain.push(ChainJoint {
-                joint: j,
-                // Joints are in topological order: the parent's index is its own.
-                parent: skeleton.parent(j),
-                offset: row(skeleton.joint(j).offset),
-            });
-        }
-        let columns: Vec<u32> = (0..6 * skeleton.len()).map(|k| (3 + k) as u32).collect();
+        let (chain, _) = chain_of(skeleton, &vec![true; skeleton.len()]);
         Ok(FootKinematics {
             joints: skeleton.len(),
+            // Every joint is on the chain: its chain index is its own.
             points: (0..skeleton.len()).map(|c| (c, None)).collect(),
+            columns: columns_of(&chain)?,
             chain,
-            columns: Tensor::from_vec(columns, 6 * skeleton.len(), &Device::Cpu)?,
             soles: Vec::new(),
         })
     }

@@ -16,9 +16,12 @@
 //! * [`feet`]: forward kinematics of the foot points (or of every joint, for
 //!   the pose speed of mixed decodes) on tensors, and the foot terms (foot position and velocity against the capture; skating and floor
 //!   penetration of clips decoded from codes mixed between training clips).
+//! * [`balance`]: the zero moment point of the simulated character's masses
+//!   against its soles, on tensors (the mixed-balance term).
 //! * [`latent`]: PCA + k-means clustering of training posteriors, near sampling.
 //! * [`trained`]: a trained model: encode, decode, sample, save, load.
 
+pub mod balance;
 pub mod data;
 pub mod error;
 pub mod features;
@@ -34,6 +37,7 @@ pub mod normalize;
 pub mod train;
 pub mod trained;
 
+pub use balance::BalanceModel;
 pub use error::{Result, VaeError};
 pub use features::{FeatureConfig, FloorLevel};
 pub use feet::FootLoss;

@@ -64,6 +64,14 @@ pub struct LossWeights {
     /// 34), and the simulated jogger fell stopping. 0: off.
     #[serde(default)]
     pub mixed_travel: f64,
+    /// On how much further a mixed-code decode's zero moment point lies
+    /// outside its touching soles than its two parents' (mean over supported
+    /// frames, `balance::Balance::zmp_outside`), in units of 10 cm, squared;
+    /// only the excess counts. Needs `TrainConfig::balance`. Jog samples
+    /// whose ZMP left the feet by more than 0.6 m fell in the simulator 110
+    /// times of 113 (crates/eval/README.md, session 35). 0: off.
+    #[serde(default)]
+    pub mixed_balance: f64,
 }
 
 impl Default for LossWeights {
@@ -77,6 +85,7 @@ impl Default for LossWeights {
             mixed_contact: 0.0,
             mixed_sole: 0.0,
             mixed_travel: 0.0,
+            mixed_balance: 0.0,
         }
     }
 }
@@ -94,6 +103,7 @@ impl LossWeights {
                 ("mixed_contact", self.mixed_contact),
                 ("mixed_sole", self.mixed_sole),
                 ("mixed_travel", self.mixed_travel),
+                ("mixed_balance", self.mixed_balance),
             ],
         )
     }

@@ -23,6 +23,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::balance::{Balance, BalanceModel};
 use crate::data::{Batch, Dataset};
 use crate::error::{Result, VaeError};
 use crate::features::FeatureConfig;
@@ -55,6 +56,10 @@ pub struct TrainConfig {
     pub max_grad_norm: Option<f32>,
     pub near: NearConfig,
     pub seed: u64,
+    /// The simulated character's masses and soles, for the mixed-balance
+    /// term (`LossWeights::mixed_balance`); `None` without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub balance: Option<BalanceModel>,
 }
 
 impl Default for TrainConfig {
@@ -73,6 +78,7 @@ impl Default for TrainConfig {
             max_grad_norm: Some(1.0),
             near: NearConfig::default(),
             seed: 0,
+            balance: None,
         }
     }
 }
@@ -106,6 +112,12 @@ impl TrainConfig {
             ));
         }
         self.near.validate()?;
+        if self.weights.mixed_balance > 0.0 && self.balance.is_none() {
+            return Err(VaeError::Config(
+                "the mixed-balance term needs the character's masses and soles (TrainConfig::balance)"
+                    .into(),
+            ));
+        }
         if self.iterations == 0 || self.batch_size == 0 {
             return Err(VaeError::Config(
                 "iterations and batch_size must be >= 1".into(),
@@ -165,6 +177,10 @@ pub struct Losses {
     /// and their parents (0 when off).
     #[serde(default)]
     pub mixed_travel: f32,
+    /// Squared excess (in units of 10 cm) of mixed-code decodes' mean ZMP
+    /// distance outside their soles over their parents' (0 when off).
+    #[serde(default)]
+    pub mixed_balance: f32,
     /// Weighted total the generator minimised.
     pub total: f32,
 }
@@ -193,6 +209,8 @@ pub struct Trainer {
     feet: Option<FootKinematics>,
     /// Kinematics of every joint, when the mixed-motion term is on.
     joints: Option<FootKinematics>,
+    /// The character's balance, when the mixed-balance term is on.
+    balance: Option<Balance>,
 }
 
 /// A batch with what the loss compares it to: rotation matrices and foot positions.
@@ -213,10 +231,16 @@ struct Prepared {
     /// Each clip's root travel profile `(B, TRAVEL_PARTS)` (when the
     /// mixed-travel term is on): what its mixed decodes are asked to match.
     travel: Option<Tensor>,
+    /// Each clip's mean ZMP distance outside its soles `(B,)` (when the
+    /// mixed-balance term is on): what its mixed decodes may not exceed.
+    balance: Option<Tensor>,
 }
 
 /// Parts of a clip the travel profile averages the root speed over.
 const TRAVEL_PARTS: usize = 4;
+
+/// The unit of the mixed-balance term's excess ZMP distance, m.
+const BALANCE_UNIT_M: f64 = 0.1;
 
 /// The correction's sole tolerance (`correct::AcceptanceConfig::sole_tolerance_m`),
 /// the unit of the mixed-sole term.
@@ -227,6 +251,7 @@ impl Prepared {
         batch: Batch,
         feet: Option<&FootKinematics>,
         joints: Option<&FootKinematics>,
+        balance: Option<&Balance>,
         config: &TrainConfig,
     ) -> Result<Self> {
         let rotations = loss::rotation_matrices(&batch.raw)?;
@@ -263,6 +288,10 @@ impl Prepared {
         } else {
             None
         };
+        let balance = balance
+            .map(|b| b.zmp_outside(&batch.raw, &batch.mask, config.features.fps))
+            .transpose()?
+            .map(|(outside, _)| outside);
         Ok(Prepared {
             batch,
             rotations,
@@ -271,6 +300,7 @@ impl Prepared {
             ground_contact,
             stance_drop,
             travel,
+            balance,
         })
     }
 }
@@ -337,12 +367,17 @@ impl Trainer {
         } else {
             None
         };
+        let balance = match (&config.balance, config.weights.mixed_balance > 0.0) {
+            (Some(model), true) => Some(Balance::new(model, &data.skeleton)?),
+            _ => None,
+        };
         let full_batch = if data.len() <= config.batch_size {
             let all: Vec<usize> = (0..data.len()).collect();
             Some(Prepared::new(
                 data.batch(&all)?,
                 feet.as_ref(),
                 joints.as_ref(),
+                balance.as_ref(),
                 config,
             )?)
         } else {
@@ -361,6 +396,7 @@ impl Trainer {
             full_batch,
             feet,
             joints,
+            balance,
         })
     }
 
@@ -380,6 +416,7 @@ impl Trainer {
             self.data.batch(&idx)?,
             self.feet.as_ref(),
             self.joints.as_ref(),
+            self.balance.as_ref(),
             &self.config,
         )
     }
@@ -460,6 +497,7 @@ impl Trainer {
             && (wf.skating > 0.0 || wf.floor > 0.0 || w.mixed_contact > 0.0 || w.mixed_sole > 0.0))
             || w.mixed_motion > 0.0
             || w.mixed_travel > 0.0
+            || self.balance.is_some()
             || mixed_adversarial
         {
             Some(self.mixed_codes(&mu, &logvar, &batch.lengths, frames)?)
@@ -502,6 +540,16 @@ impl Trainer {
             let term = m.relative_error(&made, real, 0.1)?;
             mixed_travel = term.to_scalar::<f32>()?;
             total = (total + (term * w.mixed_travel)?)?;
+        }
+        let mut mixed_balance = 0.0;
+        if let (Some(m), Some(bal), Some(real)) = (&mixed, &self.balance, &prepared.balance) {
+            let raw_mixed = raw_all.narrow(0, b, b)?;
+            let (made, _) = bal.zmp_outside(&raw_mixed, &m.mask, self.config.features.fps)?;
+            // Only what exceeds the parents' own distance, in units of 10 cm.
+            let excess = ((made - m.parents_mean(real)?)?.relu()? / BALANCE_UNIT_M)?;
+            let term = excess.sqr()?.mean_all()?;
+            mixed_balance = term.to_scalar::<f32>()?;
+            total = (total + (term * w.mixed_balance)?)?;
         }
         let mut foot = [0.0f32; 4];
         let mut mixed_contact = 0.0;
@@ -624,6 +672,7 @@ impl Trainer {
             mixed_contact,
             mixed_sole,
             mixed_travel,
+            mixed_balance,
             total: total.to_scalar()?,
         };
         if !losses.total.is_finite() {

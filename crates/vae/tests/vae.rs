@@ -516,3 +516,61 @@ fn the_mixed_travel_term_is_reported_and_trains_the_root_path() {
         |l| l.mixed_travel,
     );
 }
+
+#[test]
+fn the_mixed_balance_term_is_reported_and_keeps_the_body_over_its_foot() {
+    // The leg of `footed_clip` gliding upright at 0.5 or 1.5 m/s, its foot
+    // under the hips: never accelerating, the zero moment point stays over
+    // the sole. Decodes between two of them that jitter accelerate, and
+    // their zero moment point leaves the sole; the term smooths them.
+    let clips: Vec<Motion> = (0..6)
+        .map(|i| {
+            let leg = footed_clip(24, 0.0, 0.0);
+            let speed = if i % 2 == 0 { 0.5 } else { 1.5 };
+            let root = (0..24)
+                .map(|t| DVec3::new(0.0, 1.04, speed * t as f64 / 30.0))
+                .collect();
+            let still = vec![DQuat::IDENTITY; 24 * 4];
+            Motion::new(leg.skeleton().clone(), 30.0, root, still).unwrap()
+        })
+        .collect();
+    // The character: 1 kg at the hips, 1 kg at the ankle, a 20 x 17 cm sole
+    // 4 cm under the ankle.
+    let model = vae::BalanceModel {
+        bodies: vec![
+            vae::balance::MassPoint {
+                joint: 0,
+                offset: [0.0, 0.0, 0.0],
+                mass_kg: 1.0,
+            },
+            vae::balance::MassPoint {
+                joint: 3,
+                offset: [0.0, 0.0, 0.0],
+                mass_kg: 1.0,
+            },
+        ],
+        soles: vec![vae::balance::SoleCorners {
+            joint: 3,
+            corners: [
+                [-0.1, -0.04, -0.05],
+                [0.1, -0.04, -0.05],
+                [-0.1, -0.04, 0.12],
+                [0.1, -0.04, 0.12],
+            ],
+        }],
+        touch_m: 0.02,
+    };
+    check_mixed_term_trains(
+        &clips,
+        0.01,
+        |c, w| {
+            c.weights.mixed_balance = w;
+            c.balance = Some(model.clone());
+        },
+        |l| l.mixed_balance,
+    );
+    // The weight without the model is refused, not ignored.
+    let mut cfg = tiny_config(1);
+    cfg.weights.mixed_balance = 1.0;
+    assert!(vae::train(&clips, &cfg, |_| {}).is_err());
+}

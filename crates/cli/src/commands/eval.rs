@@ -605,6 +605,12 @@ struct TableArgs {
     /// halfway (crates/vae/README.md, session 34).
     #[arg(long, default_value_t = TableConfig::default().vae_mixed_travel_weight)]
     vae_mixed_travel_weight: f64,
+    /// Weight of the VAE's balance term on mixed codes (0 = off): keeps a
+    /// sample's zero moment point no further outside its feet than its two
+    /// parents'; jog samples far outside fall in the simulator (crates/eval/README.md,
+    /// session 35).
+    #[arg(long, default_value_t = TableConfig::default().vae_mixed_balance_weight)]
+    vae_mixed_balance_weight: f64,
     /// Weight of the VAE's skating term on mixed codes (default: the vae
     /// crate's 0.1).
     #[arg(long)]
@@ -670,6 +676,7 @@ impl TableArgs {
             vae_mixed_contact_weight: self.vae_mixed_contact_weight,
             vae_mixed_sole_weight: self.vae_mixed_sole_weight,
             vae_mixed_travel_weight: self.vae_mixed_travel_weight,
+            vae_mixed_balance_weight: self.vae_mixed_balance_weight,
             vae_skating_weight: self.vae_skating_weight,
             vae_smooth_s: self.vae_smooth_s,
             vae_plant_root: !self.vae_no_plant,

@@ -130,6 +130,12 @@ struct TrainArgs {
     /// clips they were drawn between (root speed in each quarter of the clip).
     #[arg(long)]
     mixed_travel_weight: Option<f64>,
+    /// Weight of the term asking mixed-code decodes to keep their zero moment
+    /// point no further outside their soles than the two clips they were
+    /// drawn between (the simulated character's masses and feet, as
+    /// `motionaug metrics --balance` measures).
+    #[arg(long)]
+    mixed_balance_weight: Option<f64>,
     /// Weight of the foot terms' skating of mixed-code decodes (planted feet
     /// that slide; `vae::FootLoss::skating`).
     #[arg(long)]
@@ -248,6 +254,16 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(w) = args.mixed_travel_weight {
         config.weights.mixed_travel = w;
     }
+    if let Some(w) = args.mixed_balance_weight {
+        config.weights.mixed_balance = w;
+        if w > 0.0 {
+            config.balance = Some(pipeline::vae_balance_model(
+                &clips[0],
+                &physics::CharacterOptions::default(),
+                correct::AcceptanceConfig::default().sole_tolerance_m as f32,
+            )?);
+        }
+    }
     if let Some(w) = args.skating_weight {
         config.feet.skating = w;
     }
@@ -274,10 +290,10 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         if log_every > 0 && (p.iteration % log_every == 0 || p.iteration == 1) {
             let l = p.losses;
             eprintln!(
-                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3} contact {:.4} sole {:.4} travel {:.4}",
+                "iter {:>6}/{} lr {:.2e} total {:.4} root {:.5} rot {:.5} smooth {:.5} kl {:.4} adv {:.3} disc {:.3} feet {:.4} vel {:.3} skate {:.3} floor {:.5} mixed adv {:.3} motion {:.3} contact {:.4} sole {:.4} travel {:.4} balance {:.4}",
                 p.iteration, p.iterations, p.lr, l.total, l.root, l.rotation, l.smooth, l.kl,
                 l.adversarial, l.discriminator, l.foot_position, l.foot_velocity, l.skating, l.floor,
-                l.mixed_adversarial, l.mixed_motion, l.mixed_contact, l.mixed_sole, l.mixed_travel
+                l.mixed_adversarial, l.mixed_motion, l.mixed_contact, l.mixed_sole, l.mixed_travel, l.mixed_balance
             );
         }
     })

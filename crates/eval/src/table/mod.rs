@@ -163,6 +163,10 @@ pub struct TableConfig {
     /// (`vae::LossWeights::mixed_travel`; 0: off, the vae crate's default):
     /// with the contact and skating terms, moving jog samples stop halfway.
     pub vae_mixed_travel_weight: f64,
+    /// Weight of the VAE's balance term on mixed codes
+    /// (`vae::LossWeights::mixed_balance`; 0: off, the vae crate's
+    /// default): jog samples whose ZMP leaves the feet fall in the simulator.
+    pub vae_mixed_balance_weight: f64,
     /// Weight of the VAE's skating term on mixed codes (`vae::FootLoss::skating`;
     /// `None`: the vae crate's 0.1).
     pub vae_skating_weight: Option<f64>,
@@ -218,6 +222,7 @@ impl Default for TableConfig {
             vae_mixed_contact_weight: 0.0,
             vae_mixed_sole_weight: 0.0,
             vae_mixed_travel_weight: 0.0,
+            vae_mixed_balance_weight: 0.0,
             vae_skating_weight: None,
             vae_smooth_s: vae::trained::DEFAULT_SMOOTH_S,
             vae_plant_root: true,
@@ -280,6 +285,9 @@ impl TableConfig {
         }
         if !(self.vae_mixed_travel_weight.is_finite() && self.vae_mixed_travel_weight >= 0.0) {
             return config("the VAE's mixed-travel weight must be 0 or more");
+        }
+        if !(self.vae_mixed_balance_weight.is_finite() && self.vae_mixed_balance_weight >= 0.0) {
+            return config("the VAE's mixed-balance weight must be 0 or more");
         }
         if self
             .vae_skating_weight
@@ -560,6 +568,7 @@ fn made_sets(
             mixed_contact_weight: config.vae_mixed_contact_weight,
             mixed_sole_weight: config.vae_mixed_sole_weight,
             mixed_travel_weight: config.vae_mixed_travel_weight,
+            mixed_balance_weight: config.vae_mixed_balance_weight,
             skating_weight: config.vae_skating_weight,
             level_floor: config.vae_level_floor,
         };

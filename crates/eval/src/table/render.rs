@@ -64,6 +64,12 @@ impl TableConfig {
                     json!(c.vae_mixed_travel_weight),
                 );
             }
+            if c.vae_mixed_balance_weight > 0.0 {
+                map.insert(
+                    "vae_mixed_balance_weight".into(),
+                    json!(c.vae_mixed_balance_weight),
+                );
+            }
             if let Some(w) = c.vae_skating_weight {
                 map.insert("vae_skating_weight".into(), json!(w));
             }
