@@ -76,6 +76,21 @@ pub struct Joint {
     pub limits: Option<JointLimits>,
 }
 
+impl Joint {
+    /// A joint with no file channels, end site or limits: where a skeleton
+    /// built in code (tests, fixtures) starts.
+    pub fn new(name: &str, parent: Option<usize>, offset: DVec3) -> Joint {
+        Joint {
+            name: name.into(),
+            parent,
+            offset,
+            channels: Vec::new(),
+            end_site: None,
+            limits: None,
+        }
+    }
+}
+
 /// A world transform of one joint.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Transform {
@@ -383,14 +398,7 @@ pub(crate) mod tests {
 
     /// Three joints in a line (root, a, b), unit offsets along y.
     pub(crate) fn chain() -> Skeleton {
-        let joint = |name: &str, parent, offset| Joint {
-            name: name.into(),
-            parent,
-            offset,
-            channels: vec![],
-            end_site: None,
-            limits: None,
-        };
+        let joint = Joint::new;
         Skeleton::new(
             vec![
                 joint("root", None, DVec3::ZERO),

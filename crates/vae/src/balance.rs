@@ -246,19 +246,11 @@ mod tests {
     /// A root with a 1 kg mass 1 m up and one foot joint below it whose sole is
     /// a 0.2 x 0.1 m rectangle around the foot.
     fn stick() -> (Arc<Skeleton>, BalanceModel) {
-        let joint = |name: &str, parent, offset| Joint {
-            name: name.into(),
-            parent,
-            offset,
-            channels: vec![],
-            end_site: None,
-            limits: None,
-        };
         let skeleton = Arc::new(
             Skeleton::new(
                 vec![
-                    joint("root", None, DVec3::ZERO),
-                    joint("foot", Some(0), DVec3::new(0.0, -1.0, 0.0)),
+                    Joint::new("root", None, DVec3::ZERO),
+                    Joint::new("foot", Some(0), DVec3::new(0.0, -1.0, 0.0)),
                 ],
                 1.0,
             )

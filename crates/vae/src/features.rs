@@ -266,14 +266,7 @@ mod tests {
 
     /// A root and one child joint at `child` from it.
     fn two_joints(child: DVec3) -> Arc<Skeleton> {
-        let joint = |name: &str, parent, offset| Joint {
-            name: name.into(),
-            parent,
-            offset,
-            channels: vec![],
-            end_site: None,
-            limits: None,
-        };
+        let joint = Joint::new;
         Arc::new(
             Skeleton::new(
                 vec![joint("root", None, DVec3::ZERO), joint("a", Some(0), child)],

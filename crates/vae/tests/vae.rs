@@ -12,14 +12,7 @@ use vae::model::Vae;
 use vae::{Prior, TrainConfig, TrainedVae, VaeConfig};
 
 fn skeleton() -> Arc<Skeleton> {
-    let joint = |name: &str, parent, offset| Joint {
-        name: name.into(),
-        parent,
-        offset,
-        channels: vec![],
-        end_site: None,
-        limits: None,
-    };
+    let joint = Joint::new;
     Arc::new(
         Skeleton::new(
             vec![
