@@ -261,15 +261,7 @@ pub fn train_vae(
 ) -> Result<TrainedVae> {
     let clips: Vec<Motion> = train.iter().map(|(_, m)| m.clone()).collect();
     let mut config = training.config(seed);
-    if config.weights.mixed_balance > 0.0
-        && let Some(first) = clips.first()
-    {
-        config.balance = Some(pipeline::vae_balance_model(
-            first,
-            &Default::default(),
-            correct::AcceptanceConfig::default().sole_tolerance_m as f32,
-        )?);
-    }
+    pipeline::add_vae_balance_model(&mut config, &clips)?;
     log(&format!(
         "vae: training on {} clips, {} iterations, adversarial {} (weight {}), mixed motion weight {}, mixed contact weight {}, mixed sole weight {}, mixed travel weight {}, mixed balance weight {}, skating weight {}, {}",
         clips.len(),

@@ -10,6 +10,25 @@ use physics::{CharacterOptions, CharacterSpec, Shape};
 
 use crate::PipelineError;
 
+/// Give `config` the balance model its mixed-balance weight asks for (none
+/// when the weight is 0 or there is no clip): the correction's default
+/// character for the first clip's skeleton, touching within the
+/// correction's sole tolerance. Every trainer of the VAE (the CLI, the
+/// recipe's vae stage, the eval table) goes through here.
+pub fn add_vae_balance_model(
+    config: &mut vae::TrainConfig,
+    clips: &[Motion],
+) -> Result<(), PipelineError> {
+    if let (true, Some(first)) = (config.weights.mixed_balance > 0.0, clips.first()) {
+        config.balance = Some(vae_balance_model(
+            first,
+            &CharacterOptions::default(),
+            correct::AcceptanceConfig::default().sole_tolerance_m as f32,
+        )?);
+    }
+    Ok(())
+}
+
 /// The character `options` builds for `clip`'s skeleton, its feet calibrated
 /// on `clip` when the options ask (as the correction's environment does):
 /// each body's mass at its centre in its driving joint's frame, each foot

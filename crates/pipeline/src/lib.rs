@@ -14,7 +14,7 @@ pub mod recipe;
 pub mod run;
 pub mod stages;
 
-pub use balance::vae_balance_model;
+pub use balance::{add_vae_balance_model, vae_balance_model};
 pub use codec::{decode_clip, encode_clip};
 pub use exec::{Context, Inputs, Made, Outputs, WorkClip, execute};
 pub use manifest::{CorrectionSummary, ManifestEntry};

@@ -69,15 +69,7 @@ pub fn vae(
     let _guard = span.enter();
     let mut config = step.train_config(seed);
     let motions: Vec<Motion> = clips.iter().map(|(_, m)| m.clone()).collect();
-    if config.weights.mixed_balance > 0.0
-        && let Some(first) = motions.first()
-    {
-        config.balance = Some(crate::vae_balance_model(
-            first,
-            &physics::CharacterOptions::default(),
-            correct::AcceptanceConfig::default().sole_tolerance_m as f32,
-        )?);
-    }
+    crate::add_vae_balance_model(&mut config, &motions)?;
     let model = vae::train(&motions, &config, |_| {})?;
     let samples = model.sample_finished(step.copies as usize, step.prior, seed, &step.finish())?;
     let names = crate::plan::vae_outputs(group, step.copies);

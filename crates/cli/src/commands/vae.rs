@@ -256,14 +256,8 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     }
     if let Some(w) = args.mixed_balance_weight {
         config.weights.mixed_balance = w;
-        if w > 0.0 {
-            config.balance = Some(pipeline::vae_balance_model(
-                &clips[0],
-                &physics::CharacterOptions::default(),
-                correct::AcceptanceConfig::default().sole_tolerance_m as f32,
-            )?);
-        }
     }
+    pipeline::add_vae_balance_model(&mut config, &clips)?;
     if let Some(w) = args.skating_weight {
         config.feet.skating = w;
     }
