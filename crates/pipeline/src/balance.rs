@@ -128,8 +128,9 @@ mod tests {
                 ..Default::default()
             };
             let frames = vae::features::clip_frames(&clip, &features).unwrap();
-            let n = frames.len() / vae::features::frame_dim(clip.joints());
-            let raw = Tensor::from_vec(frames, (1, n, frames_dim(&clip)), &Device::Cpu).unwrap();
+            let dim = vae::features::frame_dim(clip.joints());
+            let n = frames.len() / dim;
+            let raw = Tensor::from_vec(frames, (1, n, dim), &Device::Cpu).unwrap();
             let mask = Tensor::ones((1, n), candle_core::DType::F32, &Device::Cpu).unwrap();
             let balance = vae::balance::Balance::new(&model, clip.skeleton()).unwrap();
             let (mean, supported) = balance.zmp_outside(&raw, &mask, features.fps).unwrap();
@@ -148,9 +149,5 @@ mod tests {
                 "{name}: {mean:.3} m outside against {their_mean:.3}"
             );
         }
-    }
-
-    fn frames_dim(clip: &Motion) -> usize {
-        vae::features::frame_dim(clip.joints())
     }
 }
