@@ -328,9 +328,19 @@ struct Seen {
     /// Accepted corrected samples (before debiasing), by clip.
     corrected: HashMap<String, Motion>,
     done: usize,
-    job_started: Option<Instant>,
+    /// When each running job started, by key (corrections run side by side).
+    started: HashMap<String, Instant>,
+    /// Trackers found trained in the work folder (no "trained in" line).
+    reused: std::collections::HashSet<String>,
     debias_started: Option<Instant>,
     said_warm_start: bool,
+}
+
+/// Whether a tracker job's folder already holds its trained tracker (the
+/// runner reuses it; `class.json` is written last).
+fn tracker_trained(work: &Path, job: &pipeline::PlannedJob) -> bool {
+    pipeline::exec::job_dir(work, job)
+        .is_some_and(|dir| dir.join(correct::class::REPORT_FILE).is_file())
 }
 
 impl Seen {
@@ -341,16 +351,30 @@ impl Seen {
         event: pipeline::Event<'_>,
         originals: &[String],
         total: usize,
+        work: &Path,
         log: Log,
     ) {
         match event {
             pipeline::Event::JobStarted { job } => {
-                self.job_started = Some(Instant::now());
+                self.started.insert(job.key.clone(), Instant::now());
+                let reused = matches!(
+                    job.kind,
+                    pipeline::JobKind::Tracker { .. } | pipeline::JobKind::VariantTracker { .. }
+                ) && tracker_trained(work, job);
+                if reused {
+                    self.reused.insert(job.key.clone());
+                }
                 match &job.kind {
+                    pipeline::JobKind::Tracker { .. } if reused => {
+                        log("class tracker: reusing the one trained earlier in the work folder")
+                    }
                     pipeline::JobKind::Tracker { clips, .. } => log(&format!(
                         "class tracker: training on {} originals",
                         clips.len()
                     )),
+                    pipeline::JobKind::VariantTracker { .. } if reused => {
+                        log("second tracker: reusing the one trained earlier in the work folder")
+                    }
                     pipeline::JobKind::VariantTracker { clips, .. } => log(&format!(
                         "second tracker: judging {} samples with the class tracker, \
                          training on those it fails",
@@ -380,6 +404,10 @@ impl Seen {
                 }
             }
             pipeline::Event::JobFinished { job, ok } => {
+                let started = self.started.remove(&job.key);
+                if self.reused.contains(&job.key) {
+                    return;
+                }
                 let what = match job.kind {
                     pipeline::JobKind::Tracker { .. } => Some("class tracker"),
                     pipeline::JobKind::VariantTracker { .. } => Some("second tracker"),
@@ -389,7 +417,7 @@ impl Seen {
                     log(&format!(
                         "{what}: {} in {:.0} s",
                         if ok { "trained" } else { "failed" },
-                        self.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                        started.map_or(0.0, |t| t.elapsed().as_secs_f64())
                     ));
                 }
             }
@@ -411,7 +439,9 @@ impl Seen {
                     } else {
                         "rejected"
                     },
-                    self.job_started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                    self.started
+                        .get(&job.key)
+                        .map_or(0.0, |t| t.elapsed().as_secs_f64())
                 ));
                 if report.accepted && matches!(job.kind, pipeline::JobKind::Correct { .. }) {
                     self.corrected.insert(name.to_string(), motion.clone());
@@ -529,7 +559,7 @@ pub fn correct_originals(
     let seen = Mutex::new(Seen::default());
     let on_event = |event: pipeline::Event<'_>| {
         if let Ok(mut seen) = seen.lock() {
-            seen.observe(event, &names, names.len(), log);
+            seen.observe(event, &names, names.len(), work, log);
         }
     };
     let clips = pipeline::Clip::all_from(&originals);
@@ -602,7 +632,7 @@ pub fn correct_and_debias(
     let seen = Mutex::new(Seen::default());
     let on_event = |event: pipeline::Event<'_>| {
         if let Ok(mut seen) = seen.lock() {
-            seen.observe(event, &original_names, total, log);
+            seen.observe(event, &original_names, total, work, log);
         }
     };
     let run = run_corrections(config, &plan, &clips, made, work, threads, &on_event)?;
