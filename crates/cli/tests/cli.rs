@@ -1070,6 +1070,16 @@ fn eval_table_corrects_with_one_class_tracker() {
         serde_json::from_slice(&std::fs::read(out.join("table.json")).unwrap()).unwrap();
     let physics = &v["cells"][0]["physics"];
     assert_eq!(physics["samples"], 2, "{physics}");
+    // Every rejected clip is counted under at least one criterion.
+    let set = &physics["by_set"]["vae"];
+    let rejected = set["samples"].as_u64().unwrap() - set["samples_accepted"].as_u64().unwrap();
+    let counted: u64 = set["rejected_by"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|n| n.as_u64().unwrap())
+        .sum();
+    assert!(counted >= rejected, "{physics}");
     assert_eq!(v["config"]["physics"]["policy"], "class");
     assert_eq!(v["config"]["physics"]["variant_tracker_iterations"], 1);
 }

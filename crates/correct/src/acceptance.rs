@@ -385,6 +385,16 @@ pub fn judge(
 /// The name of the foot skating criterion.
 pub const FOOT_SKATING: &str = "foot_skating";
 
+/// Every criterion's name, in the order [`judge`] lists them (tables show
+/// rejections in this order).
+pub const CRITERIA: [&str; 5] = [
+    "no_fall",
+    "mean_reward",
+    "residual_force",
+    FOOT_SKATING,
+    "soles_flat",
+];
+
 /// Whether every criterion passed.
 pub fn all_passed(criteria: &[Criterion]) -> bool {
     criteria.iter().all(|c| c.passed)

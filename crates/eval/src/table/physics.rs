@@ -223,6 +223,9 @@ impl PhysicsConfig {
 pub struct PhysicsSummary {
     pub originals: usize,
     pub originals_accepted: usize,
+    /// Originals failing each acceptance criterion, by criterion name.
+    #[serde(default)]
+    pub originals_rejected_by: BTreeMap<String, usize>,
     /// (corrected, original) pairs the debiaser learnt from: the accepted originals.
     pub debias_pairs: usize,
     pub samples: usize,
@@ -248,6 +251,17 @@ pub struct SetCorrection {
     pub mean_r_norm: f64,
     pub mean_r_norm_action0: f64,
     pub mean_residual_force_ratio: f64,
+    /// Clips failing each acceptance criterion, by criterion name (a clip
+    /// can fail several).
+    #[serde(default)]
+    pub rejected_by: BTreeMap<String, usize>,
+}
+
+/// Adds one to each criterion `report` failed.
+fn count_failed(report: &correct::Report, counts: &mut BTreeMap<String, usize>) {
+    for c in report.criteria.iter().filter(|c| !c.passed) {
+        *counts.entry(c.name.clone()).or_default() += 1;
+    }
 }
 
 impl SetCorrection {
@@ -259,6 +273,7 @@ impl SetCorrection {
             s.mean_r_norm += r.r_norm;
             s.mean_r_norm_action0 += r.r_norm_action0;
             s.mean_residual_force_ratio += r.residual_force_ratio;
+            count_failed(r, &mut s.rejected_by);
         }
         let n = s.samples.max(1) as f64;
         s.mean_r_norm /= n;
@@ -331,7 +346,7 @@ struct Seen {
     /// When each running job started, by key (corrections run side by side).
     started: HashMap<String, Instant>,
     /// Trackers found trained in the work folder (no "trained in" line).
-    reused: std::collections::HashSet<String>,
+    reused: HashSet<String>,
     debias_started: Option<Instant>,
     said_warm_start: bool,
 }
@@ -654,6 +669,7 @@ pub fn correct_and_debias(
         if let Ok(r) = report(name) {
             summary.ppo_samples += r.samples;
             summary.originals_accepted += usize::from(r.accepted);
+            count_failed(r, &mut summary.originals_rejected_by);
         }
     }
     // The accepted originals are exactly the debiaser's training pairs.

@@ -701,6 +701,45 @@ fn correction_table(md: &mut String, actor: &str, row_cells: &[&TableCell]) {
         }
     }
     md.push('\n');
+    rejections_table(md, actor, row_cells);
+}
+
+/// Why clips were rejected: how many failed each acceptance criterion (a
+/// clip can fail several), for the originals and each corrected set.
+fn rejections_table(md: &mut String, actor: &str, row_cells: &[&TableCell]) {
+    let criteria = correct::acceptance::CRITERIA;
+    let _ = writeln!(
+        md,
+        "Rejections by criterion, test actor {actor} (clips failing each; a clip can fail several):\n\n\
+         | class | clips | accepted | {} |\n|---|---|---|{}",
+        criteria.join(" | "),
+        "---|".repeat(criteria.len())
+    );
+    for c in row_cells {
+        let Some(p) = &c.physics else { continue };
+        let originals = (p.originals, p.originals_accepted, &p.originals_rejected_by);
+        let sets = p.by_set.iter().map(|(set, s)| {
+            (
+                set.as_str(),
+                (s.samples, s.samples_accepted, &s.rejected_by),
+            )
+        });
+        for (what, (clips, accepted, rejected)) in
+            std::iter::once(("originals", originals)).chain(sets)
+        {
+            let counts: Vec<String> = criteria
+                .iter()
+                .map(|k| rejected.get(*k).copied().unwrap_or(0).to_string())
+                .collect();
+            let _ = writeln!(
+                md,
+                "| {} {what} | {clips} | {accepted} | {} |",
+                c.class,
+                counts.join(" | ")
+            );
+        }
+    }
+    md.push('\n');
 }
 
 #[cfg(test)]
@@ -744,6 +783,7 @@ mod tests {
             physics: Some(PhysicsSummary {
                 originals: 3,
                 originals_accepted: 2,
+                originals_rejected_by: [("mean_reward".to_string(), 1)].into_iter().collect(),
                 samples: 4,
                 samples_accepted: 1,
                 by_set: [("vae", 1), ("ik", 0)]
@@ -752,6 +792,10 @@ mod tests {
                         let s = crate::table::physics::SetCorrection {
                             samples: 2,
                             samples_accepted: accepted,
+                            rejected_by: [("no_fall", 2 - accepted), ("soles_flat", 1)]
+                                .into_iter()
+                                .map(|(k, n)| (k.to_string(), n))
+                                .collect(),
                             ..Default::default()
                         };
                         (set.to_string(), s)
@@ -791,6 +835,17 @@ mod tests {
         assert!(md.contains("## Correction, test actor bd"), "{md}");
         assert!(
             md.contains("| kick | 2/3 | 1/4 (ik 0/2, vae 1/2) |"),
+            "{md}"
+        );
+        // Why clips were rejected, criterion by criterion, in judging order.
+        assert!(
+            md.contains(
+                "| class | clips | accepted | no_fall | mean_reward | residual_force | foot_skating | soles_flat |\n\
+                 |---|---|---|---|---|---|---|---|\n\
+                 | kick originals | 3 | 2 | 0 | 1 | 0 | 0 | 0 |\n\
+                 | kick ik | 2 | 0 | 2 | 0 | 0 | 0 | 1 |\n\
+                 | kick vae | 2 | 1 | 1 | 0 | 0 | 0 | 1 |\n"
+            ),
             "{md}"
         );
     }
