@@ -412,7 +412,15 @@ fn finished_cell(path: &std::path::Path, config: &TableConfig) -> Option<TableCe
     }
     let text = std::fs::read(path).ok()?;
     let saved: Saved = serde_json::from_slice(&text).ok()?;
-    (saved.key == config.cell_key()).then_some(saved.cell)
+    // A cell made with predictions also serves a run without them; one made
+    // without them never serves a run that wants them.
+    let with_predictions = TableConfig {
+        predict: true,
+        ..config.clone()
+    };
+    let fits = saved.key == config.cell_key()
+        || (!config.predict && saved.key == with_predictions.cell_key());
+    fits.then_some(saved.cell)
 }
 
 /// Saves a finished cell with its key, so a rerun reuses it.
@@ -877,6 +885,14 @@ mod tests {
         let mut longer = c.clone();
         longer.train.iterations += 1;
         assert!(finished_cell(&path, &longer).is_none());
+        // A cell with predictions serves a run without them, not the reverse.
+        let mut synthesis_only = c.clone();
+        synthesis_only.predict = false;
+        assert!(finished_cell(&path, &synthesis_only).is_some());
+        let without = dir.join("cells").join("bd_kick_synthesis_only.json");
+        save_cell(&without, &synthesis_only, &cell).expect("saves");
+        assert!(finished_cell(&without, &synthesis_only).is_some());
+        assert!(finished_cell(&without, &c).is_none());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

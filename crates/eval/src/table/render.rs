@@ -89,6 +89,10 @@ impl TableConfig {
             if c.kept_rows {
                 map.insert("kept_rows".into(), json!(true));
             }
+            // A cell without predictions must not pass for one with them.
+            if !c.predict {
+                map.insert("predict".into(), json!(false));
+            }
         }
         v
     }
