@@ -420,7 +420,10 @@ fn finished_cell(path: &std::path::Path, config: &TableConfig) -> Option<TableCe
     };
     let fits = saved.key == config.cell_key()
         || (!config.predict && saved.key == with_predictions.cell_key());
-    fits.then_some(saved.cell)
+    // Cells saved before the key recorded it: one without a single trained
+    // model is a synthesis-only cell.
+    let lacks_predictions = config.predict && saved.cell.predict.values().all(|m| m.is_empty());
+    (fits && !lacks_predictions).then_some(saved.cell)
 }
 
 /// Saves a finished cell with its key, so a rerun reuses it.
@@ -867,10 +870,26 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("eval-cell-{}", std::process::id()));
         let path = dir.join("cells").join("bd_kick.json");
         let c = config();
+        let no_aug = ConditionResult {
+            errors: Horizons::new(),
+            per_seed: Vec::new(),
+            train_clips: 7,
+            train_windows: 70,
+            skipped_clips: 0,
+            train_seconds: Vec::new(),
+            first_loss: 1.0,
+            last_loss: 0.5,
+        };
         let cell = TableCell {
             class: "kick".into(),
             test_actor: "bd".into(),
             train_clips: 7,
+            predict: [(
+                "gcn".to_string(),
+                [("no_aug".to_string(), no_aug)].into_iter().collect(),
+            )]
+            .into_iter()
+            .collect(),
             ..TableCell::default()
         };
         assert!(finished_cell(&path, &c).is_none());
@@ -893,6 +912,15 @@ mod tests {
         save_cell(&without, &synthesis_only, &cell).expect("saves");
         assert!(finished_cell(&without, &synthesis_only).is_some());
         assert!(finished_cell(&without, &c).is_none());
+        // A synthesis-only cell saved before its key said so: no model in it.
+        let older = dir.join("cells").join("bd_kick_older.json");
+        let synthesis_cell = TableCell {
+            predict: BTreeMap::new(),
+            ..cell.clone()
+        };
+        save_cell(&older, &c, &synthesis_cell).expect("saves");
+        assert!(finished_cell(&older, &c).is_none());
+        assert!(finished_cell(&older, &synthesis_only).is_some());
         let _ = std::fs::remove_dir_all(&dir);
     }
 
