@@ -343,10 +343,9 @@ struct Seen {
     /// Accepted corrected samples (before debiasing), by clip.
     corrected: HashMap<String, Motion>,
     done: usize,
-    /// When each running job started, by key (corrections run side by side).
+    /// When each running job started, by key (corrections run side by side);
+    /// a tracker found trained in the work folder has no start.
     started: HashMap<String, Instant>,
-    /// Trackers found trained in the work folder (no "trained in" line).
-    reused: HashSet<String>,
     debias_started: Option<Instant>,
     said_warm_start: bool,
 }
@@ -371,13 +370,12 @@ impl Seen {
     ) {
         match event {
             pipeline::Event::JobStarted { job } => {
-                self.started.insert(job.key.clone(), Instant::now());
                 let reused = matches!(
                     job.kind,
                     pipeline::JobKind::Tracker { .. } | pipeline::JobKind::VariantTracker { .. }
                 ) && tracker_trained(work, job);
-                if reused {
-                    self.reused.insert(job.key.clone());
+                if !reused {
+                    self.started.insert(job.key.clone(), Instant::now());
                 }
                 match &job.kind {
                     pipeline::JobKind::Tracker { .. } if reused => {
@@ -420,19 +418,17 @@ impl Seen {
             }
             pipeline::Event::JobFinished { job, ok } => {
                 let started = self.started.remove(&job.key);
-                if self.reused.contains(&job.key) {
-                    return;
-                }
                 let what = match job.kind {
                     pipeline::JobKind::Tracker { .. } => Some("class tracker"),
                     pipeline::JobKind::VariantTracker { .. } => Some("second tracker"),
                     _ => None,
                 };
-                if let Some(what) = what {
+                // A tracker found trained has no start: no "trained in" line.
+                if let (Some(what), Some(started)) = (what, started) {
                     log(&format!(
                         "{what}: {} in {:.0} s",
                         if ok { "trained" } else { "failed" },
-                        started.map_or(0.0, |t| t.elapsed().as_secs_f64())
+                        started.elapsed().as_secs_f64()
                     ));
                 }
             }
